@@ -234,10 +234,11 @@ fn run_end_to_end(
         let mut pacer = Pacer::new(Nanos::ZERO, bridge.map(|_| 1.0));
         let clock = bridge.map(|b| b as &dyn ClockOut);
         let mut cursor = Cursor::<Nanos>::default();
-        let drove = drive(&mut core, &mut cursor, &mut pacer, Some(&opts.stop), clock);
+        let Ok(drove) = drive(&mut core, &mut cursor, &mut pacer, Some(&opts.stop), clock);
         let end = match drove {
-            Ok(Drove::Ended(end)) => end,
-            _ => core.interrupt(), // a pacer, instant by instant: it ends or is stopped
+            Drove::Ended(end) => end,
+            // Never: instant by instant, a pacer's run ends (a stop ends it too).
+            _ => core.interrupt(),
         };
         for c in &opts.after_end {
             // One refused here was refused in the live run too, when made: never logged.

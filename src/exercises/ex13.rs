@@ -71,7 +71,7 @@ pub fn measure_ex13(cfg: &RunConfig, stop: &StopFlag) -> Result<Ex13Outcome, Exe
         told: Cell::new(0),
     };
     let mut cursor = Cursor::<Nanos>::default();
-    let _ = drive(
+    let Ok(_) = drive(
         &mut core,
         &mut cursor,
         &mut Unpaced,

@@ -516,9 +516,11 @@ impl RunCore {
     /// between ([`drive::Unpaced`]).
     pub fn run_to_end(&mut self, stop: &StopFlag) -> RunEnd {
         let mut cursor = drive::Cursor::<Nanos>::default();
-        match drive::drive(self, &mut cursor, &mut drive::Unpaced, Some(stop), None) {
-            Ok(drive::Drove::Ended(end)) => end,
-            _ => self.interrupt(), // unpaced, instant by instant: it ends or is stopped
+        let Ok(drove) = drive::drive(self, &mut cursor, &mut drive::Unpaced, Some(stop), None);
+        match drove {
+            drive::Drove::Ended(end) => end,
+            // Never: instant by instant, an unpaced run ends (a stop ends it too).
+            _ => self.interrupt(),
         }
     }
 

@@ -201,7 +201,9 @@ impl Course {
                     reason: EndReason::Duration,
                 });
             }
-            Ok(_) => {} // over, waiting, at the limit: the reports say the end
+            // The reports say the end: a follower knows none, runs none and takes no intake.
+            Ok(Drove::Over | Drove::Waiting | Drove::Limit | Drove::Stopped) => {}
+            Ok(Drove::Ended(_) | Drove::Left) => {}
             Err(end) => self.end = Some(end),
         }
     }

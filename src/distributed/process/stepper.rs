@@ -292,8 +292,9 @@ impl Stepper {
         ran
     }
 
-    /// Run events as [`Stepper::advance`] says, through the drive loop ([`drive`]); `true` when a callback (`on_main` false) stopped before an
-    /// event that is the main thread's to run.
+    /// Run events as [`Stepper::advance`] says, through the drive loop ([`drive`]); `true`
+    /// when a callback (`on_main` false) stopped before an event that is the main thread's
+    /// to run.
     fn run_events(&mut self, inbox: &Mutex<TickInbox>, on_main: bool) -> Result<bool, DistError> {
         if self.done {
             return Ok(false);

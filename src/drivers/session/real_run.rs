@@ -66,8 +66,8 @@ impl Engine {
     }
 
     /// One stretch of [`Engine::real_run`]: the real clock from where the core is, until
-    /// the user moves on or a save restarts nodes in place: the drive loop's real-clock mode
-    /// ([`watch_real`]) under the lab's policy ([`RealPaced`]).
+    /// the user moves on or a save restarts nodes in place: the real clock's threads run the
+    /// graph while [`watch_real`] takes the lab's controls ([`RealPaced`]).
     fn real_once(
         &mut self,
         core: &mut RunCore,

@@ -242,7 +242,7 @@ impl Job {
                     progress,
                     watch: &mut watch,
                 };
-                let _ = drive(
+                let Ok(_) = drive(
                     &mut core,
                     &mut Cursor::default(),
                     &mut judged,

@@ -49,8 +49,8 @@ impl Engine {
         let clock = ros2.map(|b| b as &dyn ClockOut);
         // No stop flag of its own: the lab's run is left by its controls (`Paced::leave`),
         // and an ended run is kept, to be scrubbed, until then.
-        let _ = drive(core, &mut Cursor::default(), &mut paced, None, clock);
-        // `drive` leaves only from an intake, which has taken up an end first: `ended` has it.
+        let Ok(_) = drive(core, &mut Cursor::default(), &mut paced, None, clock);
+        // `drive` leaves only from an intake, after any end was told (`at_end`): `ended` has it.
         let Paced { next, ended, .. } = paced;
         self.leave(next.unwrap_or(Next::Quit), core.scheduler(), ended)
     }
@@ -363,8 +363,8 @@ impl Paced<'_> {
 impl DrivePolicy<Nanos, RunCore> for Paced<'_> {
     type Error = Infallible;
 
-    /// The run's end first, if the last instant ended it (so that no control is taken as
-    /// if it ran on); then the controls that have come (waiting up to 30 ms for one while
+    /// The run's end first, if the core has ended and `at_end` has not been told (so that
+    /// no control is taken as if it ran on); then the controls that have come (waiting up to 30 ms for one while
     /// paused, with no step pending, or ended), a save whose code has loaded, the status
     /// every 33 ms.
     fn intake(&mut self, core: &mut RunCore) -> Intake {
@@ -437,8 +437,9 @@ impl DrivePolicy<Nanos, RunCore> for Paced<'_> {
         Ok(Turn::Go)
     }
 
-    /// The run is told it ended, and held: frozen, and scrubbed until the user moves on
-    /// (`intake` notices the end first; this is for a run `drive` finds ended).
+    /// The run is told it ended, and held: frozen, and scrubbed until the user moves on.
+    /// `drive` asks it right after an instant that ended the run, and of a run it finds
+    /// ended; `intake` holds a run once told.
     fn at_end(&mut self, core: &mut RunCore, end: &RunEnd) -> Intake {
         let end = lab_end(end.clone(), self.cfg, core);
         self.engine.tell_ended(self.cfg, core, &end, self.paused);

@@ -41,7 +41,8 @@
 //!       it before drawing it ([`Course::peek`]: an instant's); a sleep goes back to 1, so
 //!       commands and the stop flag are seen while waiting.
 //!    4. The unit drawn ([`Course::draw`]): an instant made ready (the commands scheduled
-//!       at or before it applied, [`crate::command::TimedCommand`]), or the next event. None
+//!       at or before it applied, [`crate::command::TimedCommand`]), or the next event. An
+//!       instant peeked but moved past the duration by a phase change goes back to 1. None
 //!       left: a run taken instant by instant ends at its duration (back to 1, for its
 //!       end); otherwise [`Drove::Exhausted`].
 //! 4. A unit drawn at another time than was paced (a scheduled phase change moved the
@@ -50,7 +51,7 @@
 //!    A drawn unit is kept in the cursor until it is taken, through any wait.
 //! 5. [`DrivePolicy::turn`]: the event source's say (the launcher's horizon, which thread
 //!    may run it); `Wait` returns [`Drove::Waiting`].
-//! 6. `/clock` ([`ClockOut`]) told the unit's time, and the unit taken
+//! 6. `/clock` ([`ClockOut`]) told the unit's time (once per unit), and the unit taken
 //!    ([`DrivePolicy::take`]): run here ([`Course::run_here`], the default), or from its
 //!    report, or not yet ([`Drove::Waiting`]).
 //! 7. The cursor moves on and [`DrivePolicy::taken`] is told. A unit that stopped the run or
@@ -133,11 +134,11 @@ pub trait Course<U: Unit> {
     /// Nothing left to draw: `true` when the course has ended the run at its duration (a
     /// run core taken instant by instant; the loop goes on to its end), `false` when that is
     /// the caller's to say ([`Drove::Exhausted`]).
-    fn exhausted(&mut self) -> bool;
+    fn end_if_exhausted(&mut self) -> bool;
 
     /// The stop flag is set: the run's end, when the course ends it (interrupted at the
     /// newest instant run, instant by instant); `None`: the caller's ([`Drove::Stopped`]).
-    fn stopped(&mut self) -> Option<RunEnd>;
+    fn end_on_stop(&mut self) -> Option<RunEnd>;
 
     /// Take `unit` by running it here (the default of [`DrivePolicy::take`]).
     fn run_here(&mut self, unit: U) -> Taken;
@@ -182,7 +183,8 @@ pub enum Taken {
         /// The run ends with this unit: its node stopped the run or failed.
         over: bool,
         /// The nodes that ticked in it, as bits (bit `i % 64` for node `i`, as
-        /// [`super::Step::Ran`]); 0 where not known (an event taken from a report).
+        /// [`super::Step::Ran`]); 0 for an instant that ended the run, and where the policy
+        /// does not say (an event from a report; the lockstep's own events).
         ticked: u64,
     },
     /// Not yet: an input it must see, or its report, is still on its way.
@@ -192,8 +194,8 @@ pub enum Taken {
 /// How [`drive`] returned.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Drove {
-    /// The run ended (at its duration, a node stopped it or failed, or the stop flag), and
-    /// the policy let it go ([`DrivePolicy::at_end`]).
+    /// The run ended: at its duration, or a node stopped it or failed, and the policy let it
+    /// go ([`DrivePolicy::at_end`]); or the stop flag ended it ([`Course::end_on_stop`]).
     Ended(RunEnd),
     /// The policy left ([`Intake::Leave`]) with the run not ended.
     Left,
@@ -202,12 +204,13 @@ pub enum Drove {
     /// The unit just taken stopped the run or failed, in a course that does not know its
     /// end (a follower's, or an event taken from a report).
     Over,
-    /// No unit left, in a course that leaves its end to the caller ([`Course::exhausted`]).
+    /// No unit left, in a course that leaves its end to the caller
+    /// ([`Course::end_if_exhausted`]).
     Exhausted,
     /// Every unit up to [`Cursor::limit`] is taken.
     Limit,
     /// The stop flag was set, in a course that leaves what it means to the caller
-    /// ([`Course::stopped`]).
+    /// ([`Course::end_on_stop`]).
     Stopped,
 }
 
@@ -219,6 +222,8 @@ pub struct Cursor<U> {
     index: u64,
     next: Option<U>,
     paced: Option<Nanos>,
+    /// `/clock` was told the drawn unit's time (once, however often it is not yet here).
+    clocked: bool,
     /// The run's units, once known (the launcher's word at a run's end): none at or past
     /// this index is taken.
     pub limit: Option<u64>,
@@ -230,6 +235,7 @@ impl<U> Default for Cursor<U> {
             index: 0,
             next: None,
             paced: None,
+            clocked: false,
             limit: None,
         }
     }
@@ -272,6 +278,9 @@ pub trait DrivePolicy<U: Unit, C: Course<U> + ?Sized> {
 
     /// Between units: take commands and controls (apply them with [`RunCore::apply`]).
     /// Called before every unit is drawn, and after a [`Intake::Hold`] or a pacing sleep.
+    /// Taken instant by instant, that is between instants. Taken event by event it may be
+    /// within an instant, where a command would be logged at the wrong instant: a run across
+    /// processes takes no commands (its policies keep this default).
     fn intake(&mut self, _course: &mut C) -> Intake {
         Intake::Go
     }
@@ -294,7 +303,8 @@ pub trait DrivePolicy<U: Unit, C: Course<U> + ?Sized> {
     }
 
     /// The unit at `index` was taken, `ticked` the nodes that ticked in it ([`Taken`]): go
-    /// on, or wait (samples held back that must go out first).
+    /// on, or wait (samples held back that must go out first). Told of a unit that ended the
+    /// run too, before [`DrivePolicy::at_end`].
     fn taken(
         &mut self,
         _course: &mut C,
@@ -325,8 +335,8 @@ impl<U: Unit, C: Course<U> + ?Sized> DrivePolicy<U, C> for Unpaced {
 
 /// Drive `course` from where `cursor` stands with `policy` (module docs for the order),
 /// until the run ends and the policy lets it go, the policy leaves, or the loop must wait.
-/// `stop` set ends the run ([`Course::stopped`]); `clock` is told each unit's time before it
-/// is taken.
+/// `stop` set ends the run ([`Course::end_on_stop`]); `clock` is told each unit's time once,
+/// before it is taken.
 ///
 /// Generic over the course and the policy, so the headless run's loop pays no dynamic call
 /// per instant.
@@ -349,7 +359,7 @@ where
 {
     loop {
         if stop.is_some_and(StopFlag::is_stopped) {
-            return Ok(course.stopped().map_or(Drove::Stopped, Drove::Ended));
+            return Ok(course.end_on_stop().map_or(Drove::Stopped, Drove::Ended));
         }
         if cursor.limit.is_some_and(|l| cursor.index >= l) {
             return Ok(Drove::Limit);
@@ -377,8 +387,13 @@ where
                 }
                 cursor.paced = peeked;
                 match course.draw() {
-                    Some(unit) => *cursor.next.insert(unit),
-                    None if course.exhausted() => continue, // its end, next time round
+                    Some(unit) => {
+                        cursor.clocked = false;
+                        *cursor.next.insert(unit)
+                    }
+                    // Moved past the duration by a phase change: the end, next time round.
+                    None if peeked.is_some() => continue,
+                    None if course.end_if_exhausted() => continue, // its end, next time round
                     None => return Ok(Drove::Exhausted),
                 }
             }
@@ -396,8 +411,9 @@ where
         if policy.turn(index, unit)? == Turn::Wait {
             return Ok(Drove::Waiting);
         }
-        if let Some(out) = clock {
+        if let Some(out) = clock.filter(|_| !cursor.clocked) {
             out.clock(t);
+            cursor.clocked = true;
         }
         let (over, ticked) = match policy.take(course, index, unit)? {
             Taken::Ran { over, ticked } => (over, ticked),

@@ -1,6 +1,8 @@
 //! The courses the drive loop draws from ([`Course`]): a run core instant by instant, a
 //! run core event by event, and a follower, which draws a run's order of events and runs
-//! none of them.
+//! none of them. Which of a run core's two a call of [`super::drive`] takes is the unit of
+//! its cursor and policy: `Cursor<Nanos>` instants (every front end in one process),
+//! `Cursor<Event>` events (a launch's process).
 
 use super::{Course, Taken};
 use crate::runcore::{Follower, RunCore, Step};
@@ -23,12 +25,12 @@ impl Course<Nanos> for RunCore {
         self.prepare_instant()
     }
 
-    fn exhausted(&mut self) -> bool {
+    fn end_if_exhausted(&mut self) -> bool {
         self.finish_at_duration();
         true
     }
 
-    fn stopped(&mut self) -> Option<RunEnd> {
+    fn end_on_stop(&mut self) -> Option<RunEnd> {
         Some(self.interrupt())
     }
 
@@ -48,8 +50,9 @@ impl Course<Nanos> for RunCore {
 
 /// A run across processes, this process's share of it, event by event
 /// ([`RunCore::next_event`]): each event run here ([`RunCore::run_event`]) or taken from its
-/// report ([`RunCore::ran_elsewhere`], the policy's). What a stop or the run's last event
-/// means is the caller's.
+/// report ([`RunCore::ran_elsewhere`], the policy's). An event run here that stops the run
+/// or fails ends it (the loop's [`super::Drove::Ended`]); what a stop or the run's duration
+/// reached means is the caller's ([`super::Drove::Stopped`], [`super::Drove::Exhausted`]).
 impl Course<Event> for RunCore {
     fn end(&self) -> Option<RunEnd> {
         RunCore::end(self).cloned()
@@ -59,11 +62,11 @@ impl Course<Event> for RunCore {
         self.next_event()
     }
 
-    fn exhausted(&mut self) -> bool {
+    fn end_if_exhausted(&mut self) -> bool {
         false
     }
 
-    fn stopped(&mut self) -> Option<RunEnd> {
+    fn end_on_stop(&mut self) -> Option<RunEnd> {
         None
     }
 
@@ -93,11 +96,11 @@ impl Course<Event> for Follower {
         self.next_event()
     }
 
-    fn exhausted(&mut self) -> bool {
+    fn end_if_exhausted(&mut self) -> bool {
         false
     }
 
-    fn stopped(&mut self) -> Option<RunEnd> {
+    fn end_on_stop(&mut self) -> Option<RunEnd> {
         None
     }
 

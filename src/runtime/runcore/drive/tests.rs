@@ -146,6 +146,52 @@ mod instants {
         assert_eq!(driven, replayed);
     }
 
+    /// Counts the intakes that find nothing left to run and the run not yet ended.
+    #[derive(Default)]
+    struct AtTheEdge {
+        intakes: usize,
+    }
+    impl DrivePolicy<Nanos, RunCore> for AtTheEdge {
+        type Error = Infallible;
+        fn intake(&mut self, core: &mut RunCore) -> Intake {
+            if core.next_instant().is_none() && core.end().is_none() {
+                self.intakes += 1;
+            }
+            Intake::Go
+        }
+    }
+
+    #[test]
+    fn an_instant_moved_past_the_duration_ends_the_run_after_one_more_intake() {
+        let cfg = chapter(1.0);
+        // The last instant (1 s) moved 7 ms past the duration by a phase change at it.
+        let commands: Vec<TimedCommand> = (cfg.graph.nodes.iter())
+            .map(|n| TimedCommand {
+                at_ns: 1_000_000_000,
+                command: Command::SetPhase {
+                    node: n.name.clone(),
+                    phase_ms: 7.0,
+                },
+            })
+            .collect();
+        let mut p = AtTheEdge::default();
+        let mut c = core(&cfg, commands.clone());
+        let drove = instants(&mut c, &mut p, &StopFlag::new(), None);
+        let Drove::Ended(end) = drove else {
+            panic!("{drove:?}")
+        };
+        assert_eq!(
+            (end.reason.clone(), end.at),
+            (EndReason::Duration, cfg.duration)
+        );
+        assert!(c.now() < cfg.duration, "the instant at 1 s did not run");
+        // Between the move and the end, one intake (a stop or a command is still taken
+        // there, as before the end at any other instant).
+        assert_eq!(p.intakes, 1);
+        let (stepped, metrics, _) = stepped_to_end(core(&cfg, commands));
+        assert_eq!((end, format!("{:?}", c.metrics())), (stepped, metrics));
+    }
+
     #[test]
     fn clock_is_told_the_instant_a_scheduled_phase_change_moved_to_not_the_one_it_left() {
         let cfg = chapter(1.0);
@@ -495,6 +541,83 @@ mod events {
         assert_eq!(started, ticked);
         e.finish_at_duration();
         assert_eq!(format!("{:?}", e.metrics()), stepped_metrics(&cfg));
+    }
+
+    #[test]
+    fn an_event_run_here_that_ends_the_run_ends_the_loop_as_the_instants_do() {
+        // A 2 Hz policy lets the pole fall: the actuator's tick stops the run.
+        let mut cfg = chapter();
+        cfg.duration = Nanos(10_000_000_000);
+        cfg.set_control_hz(2.0).unwrap();
+        let mut by_instant = core(&cfg);
+        let Ok(drove) = drive(
+            &mut by_instant,
+            &mut Cursor::<Nanos>::default(),
+            &mut Unpaced,
+            None,
+            None,
+        );
+        let Drove::Ended(end) = drove else {
+            panic!("{drove:?}")
+        };
+        assert_eq!(end.reason, EndReason::NodeStopped);
+        let mut by_event = core(&cfg);
+        let mut cursor = Cursor::default();
+        let drove = take_events(&mut by_event, &mut cursor, &mut Unpaced, None);
+        assert_eq!(
+            drove,
+            Ok(Drove::Ended(end.clone())),
+            "the core knows its end"
+        );
+        assert_eq!(by_event.end(), Some(&end));
+        assert_eq!(
+            format!("{:?}", by_event.metrics()),
+            format!("{:?}", by_instant.metrics())
+        );
+        // Called again, it draws nothing: the run has ended.
+        let drove = take_events(&mut by_event, &mut cursor, &mut Unpaced, None);
+        assert_eq!(drove, Ok(Drove::Ended(end)));
+    }
+
+    /// Records the times `/clock` is told.
+    #[derive(Default)]
+    struct Clocks(std::cell::RefCell<Vec<Nanos>>);
+    impl ClockOut for Clocks {
+        fn clock(&self, t: Nanos) {
+            self.0.borrow_mut().push(t);
+        }
+    }
+
+    #[test]
+    fn clock_is_told_each_event_once_however_often_it_is_not_yet_here() {
+        let cfg = chapter();
+        let mut here = core(&cfg);
+        let mut compute = vec![];
+        let mut times = vec![];
+        while let Some(e) = here.next_event() {
+            compute.push(here.run_event(e).unwrap().1);
+            times.push(e.at());
+        }
+        let mut c = core(&cfg);
+        let mut cursor = Cursor::default();
+        let mut p = Reports {
+            compute,
+            late: vec![0, 3, 3, 40],
+            took: vec![],
+        };
+        let clocks = Clocks::default();
+        let mut waits = 0;
+        loop {
+            match drive(&mut c, &mut cursor, &mut p, None, Some(&clocks)) {
+                Ok(Drove::Waiting) => waits += 1,
+                other => {
+                    assert_eq!(other, Ok(Drove::Exhausted));
+                    break;
+                }
+            }
+        }
+        assert_eq!(waits, 4);
+        assert_eq!(*clocks.0.borrow(), times);
     }
 
     /// Takes each event as run elsewhere, from a script of compute times; not yet for the
