@@ -332,7 +332,9 @@ impl Live {
     /// Topic `id` over the window. msg/s is the count over the span between the first and
     /// the last publish stamp in the window: from the first counters that hold a message
     /// published in the window (its newest stamp), so a gap before the window (a change from
-    /// a slower rate) does not dilute it.
+    /// a slower rate) does not dilute it. A topic with one message in a whole window (slower
+    /// than one per [`WINDOW`] / 2, 0.4 Hz) has no span: its rate is that message over the
+    /// window (0.2/s), not a 0.0 that says nothing was published.
     pub fn window_topic(&self, id: TopicId) -> TopicCounts {
         let Some(newest) = &self.newest else {
             return TopicCounts::default();
@@ -347,10 +349,14 @@ impl Live {
             .filter(|c| base.is_none_or(|b| c.t > b.t))
             .map(|c| c.topics.get(id))
             .find(|s| s.published > before);
+        let mut msg_per_s = first.map_or(0.0, |f| {
+            TopicCounts::between(Some(f), last, newest.t).msg_per_s
+        });
+        if msg_per_s == 0.0 && counts.published > 0 && self.window_span().1 {
+            msg_per_s = counts.published as f64 / WINDOW.as_secs_f64();
+        }
         TopicCounts {
-            msg_per_s: first.map_or(0.0, |f| {
-                TopicCounts::between(Some(f), last, newest.t).msg_per_s
-            }),
+            msg_per_s,
             ..counts
         }
     }
@@ -493,6 +499,33 @@ mod tests {
                 2_000 => assert!((20.0..30.0).contains(&hz), "{hz}"),
                 // The window no longer holds a message.
                 7_000.. => assert_eq!(hz, 0.0),
+                _ => {}
+            }
+        }
+    }
+
+    #[test]
+    fn a_topic_with_one_message_in_a_whole_window_reads_it_over_the_window() {
+        let mut live = Live::default();
+        // One message every 4 s (0.25 Hz), from t = 0.
+        for t in (0..=12_000).step_by(20) {
+            let mut r = rec(t, 50, 0, 0, 0);
+            r.topics = TopicCounters::from_iter([TopicStats {
+                published: t / 4_000 + 1,
+                last_stamp: Nanos(t / 4_000 * 4_000 * MS),
+                depth: 1,
+                ..TopicStats::default()
+            }]);
+            live.push(r);
+            let w = live.window_topic(T);
+            match t {
+                // Two in the window (8 s and 12 s): the span between them, 0.25/s.
+                12_000 => assert_eq!((w.published, w.msg_per_s), (2, 0.25)),
+                // Only the message at 4 s since 2.98 s, a whole window: 1 in 5 s.
+                7_980 => assert_eq!((w.published, w.msg_per_s), (1, 0.2)),
+                // Younger than the window, one message: not known yet (the lab's
+                // `measuring`), not 0.2.
+                3_000 => assert_eq!((w.published, w.msg_per_s), (1, 0.0)),
                 _ => {}
             }
         }

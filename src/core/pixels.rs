@@ -23,7 +23,7 @@ impl ImageData {
     pub fn len(&self) -> usize {
         self.0.len()
     }
-    /// None?
+    /// Whether it holds no bytes.
     pub fn is_empty(&self) -> bool {
         self.0.is_empty()
     }

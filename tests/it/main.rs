@@ -52,7 +52,6 @@ pub fn loud_python_graph(dir: &std::path::Path, code: &str) -> std::path::PathBu
     g
 }
 
-/// `ratelab ARGS` run in the repository's top folder: (exit code, stdout, stderr).
 /// metrics.json `m` as pretty text without what names the graph, the brain and the nodes'
 /// kinds (each must be there): what two graphs of the same shape, one with a Python or an
 /// external node in the built-in node's place, must then have equal.
@@ -76,6 +75,7 @@ pub fn read_in_place(wire_line: &str) -> u64 {
         .map_or(0, |n| n.trim().parse().unwrap())
 }
 
+/// `ratelab ARGS` run in the repository's top folder: (exit code, stdout, stderr).
 pub fn ratelab_in_repo(args: &[&str]) -> (i32, String, String) {
     ratelab_in_repo_with(
         args,
