@@ -132,13 +132,18 @@ pub trait Course<U: Unit> {
     fn draw(&mut self) -> Option<U>;
 
     /// Nothing left to draw: `true` when the course has ended the run at its duration (a
-    /// run core taken instant by instant; the loop goes on to its end), `false` when that is
-    /// the caller's to say ([`Drove::Exhausted`]).
-    fn end_if_exhausted(&mut self) -> bool;
+    /// run core taken instant by instant; the loop goes on to its end), `false` (the
+    /// default) when that is the caller's to say ([`Drove::Exhausted`]).
+    fn end_if_exhausted(&mut self) -> bool {
+        false
+    }
 
     /// The stop flag is set: the run's end, when the course ends it (interrupted at the
-    /// newest instant run, instant by instant); `None`: the caller's ([`Drove::Stopped`]).
-    fn end_on_stop(&mut self) -> Option<RunEnd>;
+    /// newest instant run, instant by instant); `None` (the default): the caller's
+    /// ([`Drove::Stopped`]).
+    fn end_on_stop(&mut self) -> Option<RunEnd> {
+        None
+    }
 
     /// Take `unit` by running it here (the default of [`DrivePolicy::take`]).
     fn run_here(&mut self, unit: U) -> Taken;

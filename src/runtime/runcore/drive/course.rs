@@ -62,14 +62,6 @@ impl Course<Event> for RunCore {
         self.next_event()
     }
 
-    fn end_if_exhausted(&mut self) -> bool {
-        false
-    }
-
-    fn end_on_stop(&mut self) -> Option<RunEnd> {
-        None
-    }
-
     fn run_here(&mut self, event: Event) -> Taken {
         let ticked = match event {
             Event::Start { node, .. } => 1u64 << (node % 64),
@@ -94,14 +86,6 @@ impl Course<Event> for Follower {
 
     fn draw(&mut self) -> Option<Event> {
         self.next_event()
-    }
-
-    fn end_if_exhausted(&mut self) -> bool {
-        false
-    }
-
-    fn end_on_stop(&mut self) -> Option<RunEnd> {
-        None
     }
 
     /// A follower runs no node: an event is here only once its report is.
