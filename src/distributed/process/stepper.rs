@@ -26,7 +26,7 @@ use ratelab_core::node::Flow;
 use ratelab_core::time::Nanos;
 use ratelab_runtime::graph::spec::GraphSpec;
 use ratelab_runtime::graph::TopicId;
-use ratelab_runtime::runcore::drive::{drive, Cursor, DrivePolicy, Drove, Taken, Turn};
+use ratelab_runtime::runcore::drive::{drive, Cursor, DrivePolicy, Drove, Events, Taken, Turn};
 use ratelab_runtime::runcore::RunCore;
 use ratelab_runtime::scheduler::{EndReason, Event, StopFlag};
 use ratelab_runtime::summary::GraphState;
@@ -307,7 +307,7 @@ impl Stepper {
             to_main: false,
         };
         match drive(
-            &mut self.core,
+            &mut Events(&mut self.core),
             &mut self.cursor,
             &mut turn,
             Some(&stop),
@@ -337,7 +337,7 @@ struct Advance<'a> {
     to_main: bool,
 }
 
-impl DrivePolicy<Event, RunCore> for Advance<'_> {
+impl<'c> DrivePolicy<Event, Events<'c>> for Advance<'_> {
     type Error = DistError;
 
     fn turn(&mut self, _index: u64, event: Event) -> Result<Turn, DistError> {
@@ -360,7 +360,12 @@ impl DrivePolicy<Event, RunCore> for Advance<'_> {
         Ok(Turn::Go)
     }
 
-    fn take(&mut self, core: &mut RunCore, index: u64, event: Event) -> Result<Taken, DistError> {
+    fn take(
+        &mut self,
+        core: &mut Events<'c>,
+        index: u64,
+        event: Event,
+    ) -> Result<Taken, DistError> {
         let (i, _) = event.node_at();
         let t = &mut *self.turns;
         if t.local.contains(&i) {
@@ -389,7 +394,7 @@ impl DrivePolicy<Event, RunCore> for Advance<'_> {
 
     fn taken(
         &mut self,
-        _core: &mut RunCore,
+        _core: &mut Events<'c>,
         _index: u64,
         _event: Event,
         _ticked: u64,

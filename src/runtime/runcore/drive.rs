@@ -11,9 +11,10 @@
 //!   exercises), the lab's trial judge, ex13's count of `/clock` and the lab's paced
 //!   session (`ratelab_drivers::session`);
 //! - **an event** ([`Event`]: a tick's start, or its held outputs going out) of a
-//!   [`RunCore`] or a [`Follower`], for a run across processes, where each event's node
-//!   runs in one process and the others take it from its report: a process's lockstep
-//!   (`ratelab_distributed::process`) and the launcher that follows its processes.
+//!   [`RunCore`] that says so ([`Events`]) or of a [`Follower`], for a run across
+//!   processes, where each event's node runs in one process and the others take it from
+//!   its report: a process's lockstep (`ratelab_distributed::process`) and the launcher
+//!   that follows its processes.
 //!
 //! The loop blocks only where its policy asks it to: a pacing sleep ([`Pace::Sleep`], at
 //! most [`MAX_PACING_SLEEP`]) or a policy's own wait for its controls. A lockstep's policy
@@ -70,6 +71,7 @@ mod real;
 #[cfg(test)]
 mod tests;
 
+pub use course::Events;
 pub use pacer::Pacer;
 pub use real::{watch_real, RealPolicy};
 
@@ -113,8 +115,9 @@ impl Unit for Event {
 }
 
 /// What the drive loop draws its units `U` from (implemented in `drive/course.rs`): a
-/// [`RunCore`] instant by instant (`Course<Nanos>`) or event by event (`Course<Event>`), or
-/// a [`Follower`] (`Course<Event>`), which draws a run's order of events and runs none.
+/// [`RunCore`] instant by instant (`Course<Nanos>`), a run core event by event ([`Events`],
+/// `Course<Event>`), or a [`Follower`] (`Course<Event>`), which draws a run's order of
+/// events and runs none.
 pub trait Course<U: Unit> {
     /// How the run ended, once it has; `None` for a course that does not know (a
     /// follower: its policy learns the end from the reports).

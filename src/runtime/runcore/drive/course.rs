@@ -1,8 +1,8 @@
 //! The courses the drive loop draws from ([`Course`]): a run core instant by instant, a
 //! run core event by event, and a follower, which draws a run's order of events and runs
-//! none of them. Which of a run core's two a call of [`super::drive`] takes is the unit of
-//! its cursor and policy: `Cursor<Nanos>` instants (every front end in one process),
-//! `Cursor<Event>` events (a launch's process).
+//! none of them. A run core is taken instant by instant as itself (every front end in one
+//! process), and event by event only when it says so, as [`Events`] (a launch's process):
+//! the mode is in the call, not in a type parameter.
 
 use super::{Course, Taken};
 use crate::runcore::{Follower, RunCore, Step};
@@ -48,18 +48,36 @@ impl Course<Nanos> for RunCore {
     }
 }
 
+/// A run core taken event by event (a course of [`Event`]s, [`super::drive`]), for a run
+/// across processes: `drive(&mut Events(&mut core), …)`. It derefs to the core, so a
+/// policy's code reads as the core's.
+pub struct Events<'a>(pub &'a mut RunCore);
+
+impl std::ops::Deref for Events<'_> {
+    type Target = RunCore;
+    fn deref(&self) -> &RunCore {
+        self.0
+    }
+}
+
+impl std::ops::DerefMut for Events<'_> {
+    fn deref_mut(&mut self) -> &mut RunCore {
+        self.0
+    }
+}
+
 /// A run across processes, this process's share of it, event by event
 /// ([`RunCore::next_event`]): each event run here ([`RunCore::run_event`]) or taken from its
 /// report ([`RunCore::ran_elsewhere`], the policy's). An event run here that stops the run
 /// or fails ends it (the loop's [`super::Drove::Ended`]); what a stop or the run's duration
 /// reached means is the caller's ([`super::Drove::Stopped`], [`super::Drove::Exhausted`]).
-impl Course<Event> for RunCore {
+impl Course<Event> for Events<'_> {
     fn end(&self) -> Option<RunEnd> {
-        RunCore::end(self).cloned()
+        self.0.end().cloned()
     }
 
     fn draw(&mut self) -> Option<Event> {
-        self.next_event()
+        self.0.next_event()
     }
 
     fn run_here(&mut self, event: Event) -> Taken {
@@ -67,7 +85,7 @@ impl Course<Event> for RunCore {
             Event::Start { node, .. } => 1u64 << (node % 64),
             Event::Publish { .. } => 0,
         };
-        match self.run_event(event) {
+        match self.0.run_event(event) {
             Ok((flow, _)) => Taken::Ran {
                 over: flow == Flow::Stop,
                 ticked,

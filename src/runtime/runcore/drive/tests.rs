@@ -420,7 +420,7 @@ mod events {
     trait Elsewhere {
         fn elsewhere(&mut self, event: Event, compute: Nanos);
     }
-    impl Elsewhere for RunCore {
+    impl Elsewhere for Events<'_> {
         fn elsewhere(&mut self, event: Event, compute: Nanos) {
             self.ran_elsewhere(event, compute);
         }
@@ -450,7 +450,7 @@ mod events {
         waited_at: Vec<u64>,
         taken: Vec<(u64, Event)>,
     }
-    impl DrivePolicy<Event, RunCore> for Here {
+    impl<'c> DrivePolicy<Event, Events<'c>> for Here {
         type Error = EndReason;
         fn turn(&mut self, index: u64, _event: Event) -> Result<Turn, EndReason> {
             match self.wait_every {
@@ -461,7 +461,12 @@ mod events {
                 _ => Ok(Turn::Go),
             }
         }
-        fn take(&mut self, core: &mut RunCore, _: u64, event: Event) -> Result<Taken, EndReason> {
+        fn take(
+            &mut self,
+            core: &mut Events<'c>,
+            _: u64,
+            event: Event,
+        ) -> Result<Taken, EndReason> {
             let (flow, _) = core.run_event(event)?;
             Ok(Taken::Ran {
                 over: flow == Flow::Stop,
@@ -470,7 +475,7 @@ mod events {
         }
         fn taken(
             &mut self,
-            _core: &mut RunCore,
+            _core: &mut Events<'c>,
             index: u64,
             event: Event,
             _ticked: u64,
@@ -493,7 +498,7 @@ mod events {
         let mut calls = 0;
         let drew = loop {
             calls += 1;
-            match take_events(&mut c, &mut cursor, &mut p, None).unwrap() {
+            match take_events(&mut Events(&mut c), &mut cursor, &mut p, None).unwrap() {
                 Drove::Waiting => continue,
                 other => break other,
             }
@@ -531,7 +536,12 @@ mod events {
         assert!(matches!(drove, Ok(Drove::Ended(_))));
         let mut by_event = Ticks::default();
         let mut e = core(&cfg);
-        let drove = take_events(&mut e, &mut Cursor::default(), &mut by_event, None);
+        let drove = take_events(
+            &mut Events(&mut e),
+            &mut Cursor::default(),
+            &mut by_event,
+            None,
+        );
         assert_eq!(drove, Ok(Drove::Exhausted), "its end is the caller's");
         assert!(e.end().is_none());
         // An instant where only held outputs went out ticks no node.
@@ -563,7 +573,7 @@ mod events {
         assert_eq!(end.reason, EndReason::NodeStopped);
         let mut by_event = core(&cfg);
         let mut cursor = Cursor::default();
-        let drove = take_events(&mut by_event, &mut cursor, &mut Unpaced, None);
+        let drove = take_events(&mut Events(&mut by_event), &mut cursor, &mut Unpaced, None);
         assert_eq!(
             drove,
             Ok(Drove::Ended(end.clone())),
@@ -575,7 +585,7 @@ mod events {
             format!("{:?}", by_instant.metrics())
         );
         // Called again, it draws nothing: the run has ended.
-        let drove = take_events(&mut by_event, &mut cursor, &mut Unpaced, None);
+        let drove = take_events(&mut Events(&mut by_event), &mut cursor, &mut Unpaced, None);
         assert_eq!(drove, Ok(Drove::Ended(end)));
     }
 
@@ -608,7 +618,13 @@ mod events {
         let clocks = Clocks::default();
         let mut waits = 0;
         loop {
-            match drive(&mut c, &mut cursor, &mut p, None, Some(&clocks)) {
+            match drive(
+                &mut Events(&mut c),
+                &mut cursor,
+                &mut p,
+                None,
+                Some(&clocks),
+            ) {
                 Ok(Drove::Waiting) => waits += 1,
                 other => {
                     assert_eq!(other, Ok(Drove::Exhausted));
@@ -690,7 +706,7 @@ mod events {
             late: vec![],
             took: vec![],
         };
-        let drew = take_events(&mut elsewhere, &mut cursor, &mut p, None);
+        let drew = take_events(&mut Events(&mut elsewhere), &mut cursor, &mut p, None);
         assert_eq!(
             (drew, cursor.index(), cursor.left()),
             (Ok(Drove::Limit), n / 2, 0)
@@ -699,7 +715,7 @@ mod events {
         cursor.limit = Some(n);
         assert_eq!(cursor.left(), n - n / 2);
         // Goes on from the limit, at the event after the last taken.
-        let drew = take_events(&mut elsewhere, &mut cursor, &mut p, None);
+        let drew = take_events(&mut Events(&mut elsewhere), &mut cursor, &mut p, None);
         assert_eq!((drew, cursor.index()), (Ok(Drove::Limit), n));
         assert_eq!(p.took, events);
         // Run elsewhere, the executors' figures are the run here.
@@ -719,13 +735,13 @@ mod events {
             late: vec![],
             took: vec![],
         };
-        let drew = take_events(&mut c, &mut cursor, &mut p, None);
+        let drew = take_events(&mut Events(&mut c), &mut cursor, &mut p, None);
         assert_eq!(drew, Err("no report".to_string()));
         assert_eq!(cursor.index(), 5);
         assert!(cursor.next().is_some(), "the event that failed is kept");
         let stop = StopFlag::new();
         stop.stop();
-        let drew = take_events(&mut c, &mut cursor, &mut p, Some(&stop));
+        let drew = take_events(&mut Events(&mut c), &mut cursor, &mut p, Some(&stop));
         assert_eq!((drew, cursor.index()), (Ok(Drove::Stopped), 5));
     }
 
@@ -736,11 +752,11 @@ mod events {
         over: bool,
         wait: bool,
     }
-    impl DrivePolicy<Event, RunCore> for HoldAfter {
+    impl<'c> DrivePolicy<Event, Events<'c>> for HoldAfter {
         type Error = EndReason;
         fn take(
             &mut self,
-            core: &mut RunCore,
+            core: &mut Events<'c>,
             index: u64,
             event: Event,
         ) -> Result<Taken, EndReason> {
@@ -752,7 +768,7 @@ mod events {
         }
         fn taken(
             &mut self,
-            _core: &mut RunCore,
+            _core: &mut Events<'c>,
             index: u64,
             _event: Event,
             _ticked: u64,
@@ -775,7 +791,7 @@ mod events {
             over: true,
             wait: false,
         };
-        let drew = take_events(&mut c, &mut cursor, &mut p, None);
+        let drew = take_events(&mut Events(&mut c), &mut cursor, &mut p, None);
         assert_eq!((drew, cursor.index()), (Ok(Drove::Over), 10));
     }
 
@@ -789,13 +805,13 @@ mod events {
             over: false,
             wait: true,
         };
-        let drew = take_events(&mut c, &mut cursor, &mut p, None);
+        let drew = take_events(&mut Events(&mut c), &mut cursor, &mut p, None);
         assert_eq!(
             (drew, cursor.index(), cursor.next()),
             (Ok(Drove::Waiting), 5, None)
         );
         p.hold = u64::MAX;
-        let drew = take_events(&mut c, &mut cursor, &mut p, None);
+        let drew = take_events(&mut Events(&mut c), &mut cursor, &mut p, None);
         assert_eq!(drew, Ok(Drove::Exhausted), "on from the event after it");
 
         let mut c = core(&cfg);
@@ -805,7 +821,7 @@ mod events {
             over: true,
             wait: true,
         };
-        let drew = take_events(&mut c, &mut cursor, &mut p, None);
+        let drew = take_events(&mut Events(&mut c), &mut cursor, &mut p, None);
         assert_eq!((drew, cursor.index()), (Ok(Drove::Over), 5));
     }
 }
