@@ -573,6 +573,28 @@ def test_the_learners_pytest_of_predictions_passes_a_right_one_and_fails_a_wrong
             "it first fell at 5 Hz.") in wrong.stdout, wrong.stdout
 
 
+def test_copy_exercises_gives_a_folder_that_runs_and_is_never_overwritten_unasked(tmp_path):
+    folder = ratelab.copy_exercises(tmp_path / "lab")
+    assert folder == str(tmp_path / "lab" / "exercises")
+    shown = lambda d: sorted(n for n in os.listdir(d) if not n.startswith((".", "__")))
+    assert shown(folder) == shown(ROOT / "exercises")
+    assert shown(tmp_path / "lab" / "graphs") == shown(ROOT / "graphs")
+    found = ratelab.exercise("ex1", {"fails_at_hz": 5, "why": "too slow to catch it"}, dir=folder)
+    assert found.passed, found.report
+    # ex6 runs on a graph named from the exercises folder as ../graphs/…: there too.
+    mine = Path(folder) / "ex6_my_limiter.py"
+    assert mine.read_text() == (ROOT / "exercises" / "ex6_my_limiter.py").read_text()
+    mine.write_text("# my own node, half written\n")
+    with pytest.raises(FileExistsError) as e:
+        ratelab.copy_exercises(tmp_path / "lab")
+    assert "force=True" in str(e.value) and "exercises" in str(e.value)
+    assert mine.read_text() == "# my own node, half written\n", "nothing copied"
+    assert ratelab.copy_exercises(tmp_path / "lab", force=True) == folder
+    assert mine.read_text() == (ROOT / "exercises" / "ex6_my_limiter.py").read_text()
+    with pytest.raises(ratelab.SettingTypeError):
+        ratelab.copy_exercises(5)
+
+
 def test_an_exercise_returns_its_checks(tmp_path):
     folder = exercises_copy(tmp_path)
     found = ratelab.exercise("ex1", {"fails_at_hz": 5, "why": "too slow to catch it"}, dir=folder)

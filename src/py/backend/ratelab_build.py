@@ -5,6 +5,11 @@ mujoco-rs links MuJoCo's shared library at build time from `.mujoco/lib`
 build requirement in pyproject.toml), so its `libmujoco.so.3.17.0` is copied there first,
 with the `libmujoco.so` link the linker looks for. At run time the extension module loads
 the same library from the installed `mujoco` package (its rpath, src/wheel/build.rs).
+
+The wheel also carries the exercises and the graphs they run on (`ratelab/_lab/`), for
+`ratelab.copy_exercises()` outside a clone: copied into the package's source folder for
+the build and removed after (maturin packs what is there, but neither a symlink nor a
+gitignored folder).
 """
 
 import importlib.util
@@ -20,6 +25,8 @@ from maturin import (  # noqa: F401  (the rest of the backend is maturin's)
 )
 
 MUJOCO_SO = "libmujoco.so.3.17.0"
+# The folders of the repository the wheel carries under ratelab/_lab.
+LAB_FOLDERS = ("exercises", "graphs")
 
 
 def _mujoco_for_the_link():
@@ -42,9 +49,29 @@ def _mujoco_for_the_link():
         os.symlink(MUJOCO_SO, link)
 
 
+def _lab_copied():
+    """Copy LAB_FOLDERS into the package's source folder, as ratelab/_lab; the folder made,
+    or None when the tree has not got them (a build from an sdist)."""
+    root = os.getcwd()
+    if not all(os.path.isdir(os.path.join(root, d)) for d in LAB_FOLDERS):
+        return None
+    lab = os.path.join(root, "src", "py", "python", "ratelab", "_lab")
+    if os.path.lexists(lab):
+        shutil.rmtree(lab)
+    skip = shutil.ignore_patterns("__pycache__", "*.pyc", ".*")
+    for d in LAB_FOLDERS:
+        shutil.copytree(os.path.join(root, d), os.path.join(lab, d), ignore=skip)
+    return lab
+
+
 def build_wheel(wheel_directory, config_settings=None, metadata_directory=None):
     _mujoco_for_the_link()
-    return maturin.build_wheel(wheel_directory, config_settings, metadata_directory)
+    lab = _lab_copied()
+    try:
+        return maturin.build_wheel(wheel_directory, config_settings, metadata_directory)
+    finally:
+        if lab is not None:
+            shutil.rmtree(lab, ignore_errors=True)
 
 
 def build_editable(wheel_directory, config_settings=None, metadata_directory=None):

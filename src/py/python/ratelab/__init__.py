@@ -98,6 +98,7 @@ __all__ = [
     "cliff",
     "exercise",
     "exercises",
+    "copy_exercises",
     "TRACE_COLUMNS",
 ]
 
@@ -1211,7 +1212,8 @@ def exercise(
     """Run exercise `which` ("ex1", …) as `ratelab exercise` does, with `prediction` (the keys
     its file's [prediction] asks for, and "why") in place of the learner's file's when given.
 
-    dir: the folder of the exercise files and bands.toml. graph: the graph to run it on
+    dir: the folder of the exercise files and bands.toml (outside a clone of the
+    repository, `copy_exercises` makes one). graph: the graph to run it on
     (default: the exercise's own, as its bands name it). rate, depth, qos, link, lease_ms,
     compute_ms, executor: the graph's overrides, as `run` takes them. An exercise injects
     its own faults and sets its own clock and the chain's rates (control_hz, sensor_hz,
@@ -1235,6 +1237,44 @@ def exercise(
         report=list(found["lines"]),
         predictions=[Prediction(k, said, v) for k, said, v in found["predictions"]],
     )
+
+
+def copy_exercises(to: PathLike = ".", *, force: bool = False) -> str:
+    """Copy the exercises and the graphs they run on, which the package carries, into the
+    folder `to` (as `to/exercises` and `to/graphs`, made if missing), so that they run and
+    can be edited outside a clone of the repository (ex6 asks for a node of your own, ex11
+    for a brain). Returns the exercises folder, for `exercise`'s `dir`:
+
+        folder = ratelab.copy_exercises("my-lab")
+        ratelab.exercise("ex1", {"fails_at_hz": 5, "why": "..."}, dir=folder)
+
+    Raises FileExistsError, copying nothing, when `to/exercises` or `to/graphs` exists and
+    `force` is not set (force=True replaces them); FileNotFoundError when this install
+    carries no exercises (an editable install, or one built from an sdist: use the clone's
+    `exercises/`).
+    """
+    import shutil
+
+    target = _path("to", to)
+    lab = os.path.join(os.path.dirname(os.path.abspath(__file__)), "_lab")
+    if not os.path.isdir(os.path.join(lab, "exercises")):
+        raise FileNotFoundError(
+            "this install of ratelab carries no exercises (an editable install, or one "
+            "built from an sdist): use the exercises/ folder of the repository"
+        )
+    folders = ("exercises", "graphs")
+    there = [f for f in folders if os.path.lexists(os.path.join(target, f))]
+    if there and not force:
+        names = " and ".join(os.path.join(target, f) for f in there)
+        raise FileExistsError(f"{names} already exist: pass force=True to replace them")
+    for f in folders:
+        dest = os.path.join(target, f)
+        if os.path.isdir(dest) and not os.path.islink(dest):
+            shutil.rmtree(dest)
+        elif os.path.lexists(dest):
+            os.remove(dest)
+        shutil.copytree(os.path.join(lab, f), dest)
+    return os.path.join(target, "exercises")
 
 
 def exercises() -> List[Dict[str, str]]:
