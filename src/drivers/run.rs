@@ -14,7 +14,7 @@ use ratelab_core::time::Nanos;
 use ratelab_runtime::config::{ClockKind, RunConfig};
 use ratelab_runtime::graph::lock;
 use ratelab_runtime::policy::Policy;
-use ratelab_runtime::runcore::drive::{drive, ClockOut, Cursor, Drove, Pacer};
+use ratelab_runtime::runcore::drive::{ClockOut, Pacer};
 use ratelab_runtime::runcore::{CoreOptions, RunCore};
 use ratelab_runtime::scheduler::{RealOptions, RunEnd, StopFlag};
 use std::time::{Duration, Instant};
@@ -233,13 +233,7 @@ fn run_end_to_end(
         // otherwise it runs unpaced.
         let mut pacer = Pacer::new(Nanos::ZERO, bridge.map(|_| 1.0));
         let clock = bridge.map(|b| b as &dyn ClockOut);
-        let mut cursor = Cursor::<Nanos>::default();
-        let Ok(drove) = drive(&mut core, &mut cursor, &mut pacer, Some(&opts.stop), clock);
-        let end = match drove {
-            Drove::Ended(end) => end,
-            // Never: instant by instant, a pacer's run ends (a stop ends it too).
-            _ => core.interrupt(),
-        };
+        let end = core.run_to_end_with(&mut pacer, &opts.stop, clock);
         for c in &opts.after_end {
             // One refused here was refused in the live run too, when made: never logged.
             let _ = core.apply_after_end(c);

@@ -10,7 +10,7 @@ use super::{check, Check, Context, Exercise, ExerciseError, Reconcile, Said, Sec
 use ratelab_core::time::Nanos;
 use ratelab_runtime::config::{duration_from_secs, ClockKind, RunConfig};
 use ratelab_runtime::policy::Scripted;
-use ratelab_runtime::runcore::drive::{drive, ClockOut, Cursor, Unpaced};
+use ratelab_runtime::runcore::drive::{ClockOut, Unpaced};
 use ratelab_runtime::runcore::{CoreOptions, RunCore};
 use ratelab_runtime::scheduler::StopFlag;
 use serde::Deserialize;
@@ -70,14 +70,7 @@ pub fn measure_ex13(cfg: &RunConfig, stop: &StopFlag) -> Result<Ex13Outcome, Exe
         before: cfg.duration,
         told: Cell::new(0),
     };
-    let mut cursor = Cursor::<Nanos>::default();
-    let Ok(_) = drive(
-        &mut core,
-        &mut cursor,
-        &mut Unpaced,
-        Some(stop),
-        Some(&clock),
-    );
+    core.run_to_end_with(&mut Unpaced, stop, Some(&clock));
     super::interrupted(stop)?;
     let instants = clock.told.get();
     Ok(Ex13Outcome {

@@ -515,11 +515,26 @@ impl RunCore {
     /// interrupted at the newest instant run): [`drive::drive`] with nothing paced or taken in
     /// between ([`drive::Unpaced`]).
     pub fn run_to_end(&mut self, stop: &StopFlag) -> RunEnd {
-        let mut cursor = drive::Cursor::<Nanos>::default();
-        let Ok(drove) = drive::drive(self, &mut cursor, &mut drive::Unpaced, Some(stop), None);
+        self.run_to_end_with(&mut drive::Unpaced, stop, None)
+    }
+
+    /// Run to the end instant by instant under `policy` ([`drive::drive`] from where the run
+    /// stands, `clock` told each instant), checking `stop` before each: how the run ended. A
+    /// policy that leaves ([`drive::Intake::Leave`]) ends it as interrupted there.
+    pub fn run_to_end_with<P>(
+        &mut self,
+        policy: &mut P,
+        stop: &StopFlag,
+        clock: Option<&dyn drive::ClockOut>,
+    ) -> RunEnd
+    where
+        P: drive::DrivePolicy<Nanos, RunCore, Error = std::convert::Infallible> + ?Sized,
+    {
+        let mut cursor = drive::Cursor::default();
+        let Ok(drove) = drive::drive(self, &mut cursor, policy, Some(stop), clock);
         match drove {
             drive::Drove::Ended(end) => end,
-            // Never: instant by instant, an unpaced run ends (a stop ends it too).
+            // Instant by instant the run ends (a stop ends it too) unless the policy left.
             _ => self.interrupt(),
         }
     }

@@ -24,7 +24,7 @@ use ratelab_core::time::Nanos;
 use ratelab_runtime::checkpoint::load_policy;
 use ratelab_runtime::config::RunConfig;
 use ratelab_runtime::graph::{Graph, GraphHandles, GraphSpec};
-use ratelab_runtime::runcore::drive::{drive, Cursor, DrivePolicy, Turn};
+use ratelab_runtime::runcore::drive::{DrivePolicy, Turn};
 use ratelab_runtime::runcore::{CoreOptions, RunCore};
 use ratelab_runtime::scheduler::StopFlag;
 use std::convert::Infallible;
@@ -242,13 +242,7 @@ impl Job {
                     progress,
                     watch: &mut watch,
                 };
-                let Ok(_) = drive(
-                    &mut core,
-                    &mut Cursor::default(),
-                    &mut judged,
-                    Some(stop),
-                    None,
-                );
+                core.run_to_end_with(&mut judged, stop, None);
                 watch.next(None);
                 let topics = core.handles().spec.topics.iter();
                 let topics = topics.map(|t| t.name.clone()).collect();
