@@ -49,6 +49,12 @@ struct Opts {
     /// Payloads in all.
     #[arg(long, default_value_t = 300, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
     count: u64,
+    /// Stamp each frame before it is written, so that its one write is timed (as ratelab's
+    /// copy of a frame into its pool was before its nodes drew frames into lent buffers).
+    /// By default a frame is written first (a camera's driver filling a loaned buffer) and
+    /// stamped as it is put, as ratelab now stamps a frame drawn into a lent buffer.
+    #[arg(long)]
+    stamp_before_write: bool,
     /// Run as the subscriber: ENDPOINT CREDENTIALS (the publisher starts it).
     #[arg(long, num_args = 2, hide = true)]
     far: Option<Vec<String>>,
@@ -155,11 +161,13 @@ fn main() {
         }
         // A new frame each time, as a camera writes one: its pixels, then its send time,
         // written once, into a buffer of the pool when it has room, else into memory of its
-        // own (then it crosses the socket).
+        // own (then it crosses the socket). A frame in the pool is stamped as it is put,
+        // after it is written (drawn into a loaned buffer, as a ratelab node draws into the
+        // buffer its topic lent: nothing but the stamp is written after it), or before it
+        // with --stamp-before-write; a frame of its own, before it is written (as ratelab
+        // writes a sample that crosses the socket after its stamp).
         let shade = (k % 251) as u8;
-        // Stamped before the frame is written: its one write counts, as ratelab's copy of
-        // a message into its pool does (stamped before the sample is written).
-        let sent = mono_now_ns().to_le_bytes();
+        let early = opts.stamp_before_write.then(mono_now_ns);
         let shared = pool.as_ref().and_then(|p| {
             p.alloc(bytes)
                 .with_policy::<Defragment<GarbageCollect>>()
@@ -169,12 +177,14 @@ fn main() {
         let frame: ZBytes = match shared {
             Some(mut frame) => {
                 frame.fill(shade);
-                frame[..8].copy_from_slice(&sent);
+                let sent = early.unwrap_or_else(mono_now_ns);
+                frame[..8].copy_from_slice(&sent.to_le_bytes());
                 frame.into()
             }
             None => {
+                let sent = early.unwrap_or_else(mono_now_ns);
                 let mut frame = vec![shade; bytes];
-                frame[..8].copy_from_slice(&sent);
+                frame[..8].copy_from_slice(&sent.to_le_bytes());
                 frame.into()
             }
         };

@@ -266,9 +266,10 @@ fn wire_line(w: &ratelab::distributed::wire::WireLink) -> String {
     let since = w.since_ns.map_or(String::new(), |t| {
         format!(" since its rejoin at {:.3} s", t as f64 / 1e9)
     });
-    let in_place = match w.in_place {
-        0 => String::new(),
-        n => format!(" | {n} read in place from shared memory"),
+    let in_place = match (w.in_place, w.drawn_in_place) {
+        (0, _) => String::new(),
+        (n, 0) => format!(" | {n} read in place from shared memory"),
+        (n, d) => format!(" | {n} read in place from shared memory | {d} as their node drew them"),
     };
     format!(
         "wire {} into '{}': {} samples{since}, p50 {} µs | p99 {} µs | max {} µs{in_place}",

@@ -7,6 +7,12 @@
 //! copied: they are a view of that buffer, which they keep alive. This is how a camera's
 //! frame that crossed processes through Zenoh's shared memory reaches its subscriber without
 //! a copy (issue 76).
+//!
+//! A node that makes a large frame can draw it straight into the buffer it will cross in:
+//! its output topic lends one ([`PixelBuffer`], from the topic's [`Lender`]: a launch's
+//! process lends buffers of its shared-memory pool), as ROS 2 lends a publisher's message
+//! (rclcpp's `Publisher::borrow_loaned_message`). The frame is then written once, by the
+//! node, and never copied on its way to another process.
 
 use bytes::Bytes;
 use serde::{Deserialize, Serialize};
@@ -51,6 +57,96 @@ impl From<Vec<u8>> for ImageData {
 impl From<&[u8]> for ImageData {
     fn from(v: &[u8]) -> ImageData {
         ImageData(Bytes::copy_from_slice(v))
+    }
+}
+
+/// Where a topic's frames may be drawn before they are published ([`PixelBuffer::lent`]):
+/// a launch's process lends buffers of its shared-memory pool for a topic that crosses to
+/// another process, so that the frame crosses without a copy. Set on a topic with
+/// `AnyTopic::set_lender`.
+pub trait Lender: Send + Sync {
+    /// A buffer of `len` bytes, every one 0, or `None` when there is none to lend now (the
+    /// frame is too small to be worth it, the pool is full or not made yet): the node then
+    /// draws into memory of its own, and the frame is copied once on its way out.
+    fn lend(&self, len: usize) -> Option<Box<dyn LentPixels>>;
+}
+
+/// A buffer a [`Lender`] lent, being drawn into.
+pub trait LentPixels: Send {
+    /// Its bytes, to draw into.
+    fn bytes_mut(&mut self) -> &mut [u8];
+    /// Its bytes.
+    fn bytes(&self) -> &[u8];
+    /// Done drawing: the bytes, shared from here on (they are never written again), still
+    /// in the lender's buffer, which they keep until the last holder lets go.
+    fn freeze(self: Box<Self>) -> Bytes;
+}
+
+/// A frame's pixels being drawn, before they are published as [`ImageData`]: every byte 0
+/// to start with, in a buffer a topic lent ([`PixelBuffer::lent`]) or in memory of their own
+/// ([`PixelBuffer::zeroed`]). `PixelBuffer` derefs to `[u8]`; `ImageData::from` ends the
+/// drawing without copying a byte.
+pub struct PixelBuffer(Drawn);
+
+enum Drawn {
+    Own(Vec<u8>),
+    Lent(Box<dyn LentPixels>),
+}
+
+impl PixelBuffer {
+    /// `len` bytes of memory of their own, every one 0.
+    pub fn zeroed(len: usize) -> PixelBuffer {
+        PixelBuffer(Drawn::Own(vec![0; len]))
+    }
+
+    /// `len` bytes, every one 0: lent by `lender` when it has a buffer to lend, else
+    /// [`PixelBuffer::zeroed`].
+    pub fn lent(lender: Option<&dyn Lender>, len: usize) -> PixelBuffer {
+        match lender.and_then(|l| l.lend(len)) {
+            Some(buf) if buf.bytes().len() == len => PixelBuffer(Drawn::Lent(buf)),
+            _ => PixelBuffer::zeroed(len),
+        }
+    }
+
+    /// Whether a lender lent these bytes.
+    pub fn is_lent(&self) -> bool {
+        matches!(self.0, Drawn::Lent(_))
+    }
+}
+
+impl std::ops::Deref for PixelBuffer {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        match &self.0 {
+            Drawn::Own(v) => v,
+            Drawn::Lent(b) => b.bytes(),
+        }
+    }
+}
+
+impl std::ops::DerefMut for PixelBuffer {
+    fn deref_mut(&mut self) -> &mut [u8] {
+        match &mut self.0 {
+            Drawn::Own(v) => v,
+            Drawn::Lent(b) => b.bytes_mut(),
+        }
+    }
+}
+
+impl From<PixelBuffer> for ImageData {
+    /// The drawn pixels, shared from here on: not copied.
+    fn from(px: PixelBuffer) -> ImageData {
+        match px.0 {
+            Drawn::Own(v) => ImageData::from(v),
+            Drawn::Lent(b) => ImageData(b.freeze()),
+        }
+    }
+}
+
+impl std::fmt::Debug for PixelBuffer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let whose = if self.is_lent() { "lent" } else { "own" };
+        write!(f, "<{} bytes, {whose}>", self.len())
     }
 }
 
@@ -171,6 +267,71 @@ mod tests {
         // An empty run is never a view; clones share their bytes.
         assert!(!ImageData::default().is_within(&[0u8; 4]));
         assert!(a.shares(&a.clone()) && !a.shares(&b));
+    }
+
+    /// A lender of buffers of its own, each `len` bytes of 0xAA (then zeroed, as a lender
+    /// must), or `wrong` bytes long.
+    struct Lends {
+        wrong: Option<usize>,
+    }
+
+    struct Lent(Vec<u8>);
+
+    impl LentPixels for Lent {
+        fn bytes_mut(&mut self) -> &mut [u8] {
+            &mut self.0
+        }
+        fn bytes(&self) -> &[u8] {
+            &self.0
+        }
+        fn freeze(self: Box<Self>) -> Bytes {
+            Bytes::from(self.0)
+        }
+    }
+
+    impl Lender for Lends {
+        fn lend(&self, len: usize) -> Option<Box<dyn LentPixels>> {
+            let mut b = vec![0xAA; self.wrong.unwrap_or(len)];
+            b.fill(0);
+            Some(Box::new(Lent(b)))
+        }
+    }
+
+    #[test]
+    fn a_frame_drawn_into_a_lent_buffer_is_published_without_a_copy() {
+        let lender = Lends { wrong: None };
+        let mut px = PixelBuffer::lent(Some(&lender), 6);
+        assert!(px.is_lent() && px.len() == 6 && px.iter().all(|&b| b == 0));
+        px[2] = 9;
+        let at = px.as_ptr();
+        let img = ImageData::from(px);
+        assert_eq!(img.as_slice(), &[0, 0, 9, 0, 0, 0]);
+        assert_eq!(img.as_slice().as_ptr(), at, "the lent bytes themselves");
+        // No lender, or one that lends a buffer of another length: memory of its own.
+        let own = PixelBuffer::lent(None, 4);
+        assert!(!own.is_lent() && *own == [0u8; 4]);
+        let wrong = Lends { wrong: Some(5) };
+        let px = PixelBuffer::lent(Some(&wrong), 4);
+        assert!(!px.is_lent() && px.len() == 4);
+        assert_eq!(format!("{px:?}"), "<4 bytes, own>");
+    }
+
+    #[test]
+    fn a_topic_lends_its_publisher_what_its_lender_gives() {
+        use crate::msg::{AnyTopic, ImageMsg, Message};
+        use std::sync::Arc;
+        let topic = AnyTopic::new("/image", ImageMsg::TYPE, 1).unwrap();
+        assert!(!topic.loan_pixels(8).is_lent(), "no lender yet");
+        assert!(topic.set_lender(Arc::new(Lends { wrong: None })));
+        assert!(topic.loan_pixels(8).is_lent());
+        // A lender is set once.
+        assert!(!topic.set_lender(Arc::new(Lends { wrong: None })));
+        // A topic with two subscriptions lends as one.
+        let fan =
+            AnyTopic::with_subscriptions("/image", ImageMsg::TYPE, 1, Default::default(), 0, 2);
+        let fan = fan.unwrap();
+        assert!(fan.set_lender(Arc::new(Lends { wrong: None })));
+        assert!(fan.loan_pixels(8).is_lent());
     }
 
     #[test]

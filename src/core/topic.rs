@@ -499,6 +499,8 @@ pub struct Subscription<T> {
     changes: OnceLock<ChangeSlot>,
     /// The taps, in the order they were added (none: the lock is never made).
     taps: OnceLock<Mutex<Vec<Tap<T>>>>,
+    /// Where its publisher's frames may be drawn ([`Subscription::set_lender`]).
+    lender: OnceLock<Arc<dyn crate::pixels::Lender>>,
 }
 
 impl<T: Clone> Subscription<T> {
@@ -562,6 +564,7 @@ impl<T: Clone> Subscription<T> {
             }),
             changes: OnceLock::new(),
             taps: OnceLock::new(),
+            lender: OnceLock::new(),
         })
     }
 
@@ -584,6 +587,18 @@ impl<T: Clone> Subscription<T> {
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .push(tap);
+    }
+
+    /// Lend its publisher's frames from `lender` from now on (a launch's process lends
+    /// buffers of its shared-memory pool for a topic that crosses to another): false, and
+    /// nothing changed, when a lender was set before.
+    pub fn set_lender(&self, lender: Arc<dyn crate::pixels::Lender>) -> bool {
+        self.lender.set(lender).is_ok()
+    }
+
+    /// The lender of its publisher's frames, if one was set ([`Subscription::set_lender`]).
+    pub fn lender(&self) -> Option<&Arc<dyn crate::pixels::Lender>> {
+        self.lender.get()
     }
 
     /// Tell every tap of `msg` (nothing to do, and no lock taken, without one).

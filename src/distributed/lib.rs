@@ -550,6 +550,25 @@ pub const SHARED_MEMORY_ENV: &str = "RATELAB_SHARED_MEMORY";
 /// (300 KiB and up) go through it.
 pub const SHM_THRESHOLD_BYTES: usize = 64 * 1024;
 
+/// Which run of a payload that arrived through Zenoh is a buffer in shared memory, if any
+/// (its bytes stay in the publisher's pool; what crossed for it is a reference): its one run
+/// when Zenoh says so (`as_shm`), or, of several runs, the first of [`SHM_THRESHOLD_BYTES`]
+/// or more (a frame its node drew into a lent buffer, sent beside its head: Zenoh has no
+/// public way to ask of one run among several, and only a shared-memory run is that long,
+/// since Zenoh's receive batches are shorter than 64 KiB and a sample fragmented across
+/// them arrives in runs of theirs). For a payload that arrived, not one made locally.
+pub(crate) fn shared_run(payload: &zenoh::bytes::ZBytes) -> Option<usize> {
+    if payload.as_shm().is_some() {
+        return Some(0);
+    }
+    let mut runs = payload.slices();
+    runs.next()?;
+    runs.next()?;
+    payload
+        .slices()
+        .position(|run| run.len() >= SHM_THRESHOLD_BYTES)
+}
+
 /// The size of a process's shared-memory pool, bytes (Zenoh's default pool size): made
 /// before the run by a process whose outbound topics have a field of bytes, else when the
 /// process first sends a sample of [`SHM_THRESHOLD_BYTES`] or more. A sample that finds

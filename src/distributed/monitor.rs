@@ -1338,6 +1338,7 @@ mod tests {
             p99_us: 300.0,
             max_us: 400.0,
             in_place: 0,
+            drawn_in_place: 0,
             since_ns: None,
         };
         let mut m = live("policy", vec![], vec![]);

@@ -42,6 +42,7 @@ use zenoh::Wait;
 mod bridge;
 mod join;
 mod real_clock;
+mod shm;
 mod stats;
 mod stepper;
 
@@ -515,8 +516,9 @@ impl Share {
 
 #[cfg(test)]
 mod tests {
-    use super::bridge::{crossings, too_large, Outlet, SharedPool, Spill};
+    use super::bridge::{crossings, too_large, Outlet, Spill};
     use super::real_clock::figures_time;
+    use super::shm::SharedPool;
     use crate::wire::{WireSample, MAX_SENT_PER_TICK};
     use ratelab_core::msg::{force::ForceMsg, MsgData};
     use ratelab_core::time::Nanos;

@@ -444,10 +444,15 @@ fn a_megabyte_frame_crosses_processes_whole_with_its_counters_right() {
             .and_then(|r| r.split(' ').next())
             .and_then(|n| n.parse().ok())
             .unwrap_or_else(|| panic!("{line}"));
+        // And the camera drew every frame straight into a buffer of that pool, which its
+        // topic lent it: the frame crossed without a copy between the drawing and the
+        // vision node's pixels.
+        let drawn = crate::drawn_in_place(line);
         if shm == "on" {
             assert_eq!(in_place, samples, "{line}\n{}", text(&o.stderr));
+            assert_eq!(drawn, samples, "{line}\n{}", text(&o.stderr));
         } else {
-            assert_eq!(in_place, 0, "{line}");
+            assert_eq!((in_place, drawn), (0, 0), "{line}");
         }
     }
     assert!(t1.lines().count() > 30, "{t1:.300}");

@@ -69,9 +69,21 @@ pub fn metrics_without_names(mut m: serde_json::Value) -> String {
 /// read in place from shared memory`) says were read in place: 0 when it says none (shared
 /// memory off).
 pub fn read_in_place(wire_line: &str) -> u64 {
+    wire_line_count(wire_line, " read in place from shared memory")
+}
+
+/// Of those, how many crossed in the buffer their publishing node drew them into (a lent
+/// buffer, issue 76), as a launch's wire line says it; 0 when it says none.
+pub fn drawn_in_place(wire_line: &str) -> u64 {
+    wire_line_count(wire_line, " as their node drew them")
+}
+
+/// The count a launch's wire line gives before `suffix` in one of its ` | ` parts; 0 when
+/// no part ends so.
+fn wire_line_count(wire_line: &str, suffix: &str) -> u64 {
     wire_line
         .split(" | ")
-        .find_map(|part| part.strip_suffix(" read in place from shared memory"))
+        .find_map(|part| part.strip_suffix(suffix))
         .map_or(0, |n| n.trim().parse().unwrap())
 }
 

@@ -41,6 +41,7 @@
 
 pub mod force;
 pub mod image;
+mod pieces;
 pub mod position;
 pub mod ros_mapping;
 pub mod state;
@@ -216,6 +217,7 @@ pub struct MsgTypeInfo {
     type_id: fn() -> TypeId,
     new_topic: fn(&str, usize, TopicQos, u64, usize) -> Result<AnyTopic, ZeroDepth>,
     from_bytes: fn(&[u8]) -> Result<MsgData, String>,
+    from_pieces: fn(&[&[u8]]) -> Result<MsgData, String>,
     from_fields: fn(&[f64]) -> MsgData,
     from_values: fn(&[Value]) -> MsgData,
     ros2: fn() -> Option<RosCodec>,
@@ -231,6 +233,7 @@ impl MsgTypeInfo {
             type_id: TypeId::of::<M>,
             new_topic: new_topic::<M>,
             from_bytes: from_bytes::<M>,
+            from_pieces: from_pieces::<M>,
             from_fields: from_fields::<M>,
             from_values: from_values::<M>,
             ros2: M::ros2,
@@ -285,6 +288,28 @@ fn from_bytes<M: Message>(bytes: &[u8]) -> Result<MsgData, String> {
     }
 }
 
+fn from_pieces<M: Message>(pieces: &[&[u8]]) -> Result<MsgData, String> {
+    let len: usize = pieces.iter().map(|p| p.len()).sum();
+    if len > MAX_PAYLOAD_BYTES {
+        return Err(format!(
+            "a {} payload of {len} bytes (at most {MAX_PAYLOAD_BYTES})",
+            M::NAME
+        ));
+    }
+    let mut de = postcard::Deserializer::from_flavor(pieces::FromPieces::new(pieces));
+    let decoded = M::deserialize(&mut de);
+    // The flavor's finalize cannot fail.
+    let left = de.finalize().map_err(|e| e.to_string())?;
+    match decoded {
+        Err(_) if left.straddled => {
+            Err(format!("not a {} payload: {}", M::NAME, pieces::STRADDLES))
+        }
+        Err(e) => Err(format!("not a {} payload: {e}", M::NAME)),
+        Ok(m) if left.bytes == 0 => Ok(MsgData::new(m)),
+        Ok(_) => Err(format!("{} bytes after a {} payload", left.bytes, M::NAME)),
+    }
+}
+
 /// A registered message type: a cheap handle (compare, hash, print by name).
 #[derive(Clone, Copy)]
 pub struct MsgType(&'static MsgTypeInfo);
@@ -328,6 +353,17 @@ impl MsgType {
     /// One line: too long, not this type, or bytes after its end.
     pub fn decode(self, bytes: &[u8]) -> Result<MsgData, String> {
         (self.0.from_bytes)(bytes)
+    }
+    /// A payload of this type from its wire bytes in pieces, read in order (a sample that
+    /// crossed as a head and a shared-memory frame): as [`MsgType::decode`] of the pieces
+    /// joined, with a field of bytes borrowed from the piece it lies in (a view of it inside
+    /// [`crate::pixels::decode_within`]).
+    ///
+    /// # Errors
+    /// As [`MsgType::decode`], and a field of bytes that straddles two pieces (the caller
+    /// may decode the pieces joined instead).
+    pub fn decode_pieces(self, pieces: &[&[u8]]) -> Result<MsgData, String> {
+        (self.0.from_pieces)(pieces)
     }
     /// A payload of this type from its fields, in order (missing ones 0, extra ignored).
     pub fn from_fields(self, fields: &[f64]) -> MsgData {
@@ -622,6 +658,7 @@ trait DynMessage: Any + Send + Sync + fmt::Debug {
     fn to_bytes(&self) -> Vec<u8>;
     fn encoded_len(&self) -> usize;
     fn encode_into(&self, out: &mut [u8]) -> Result<usize, String>;
+    fn encode_pieces(&self, sink: &mut dyn FnMut(&[u8])) -> Result<(), String>;
     fn eq_dyn(&self, other: &dyn DynMessage) -> bool;
 }
 
@@ -645,6 +682,10 @@ impl<M: Message> DynMessage for M {
     fn encode_into(&self, out: &mut [u8]) -> Result<usize, String> {
         postcard::to_slice(self, out)
             .map(|written| written.len())
+            .map_err(|e| format!("a {} payload: {e}", M::NAME))
+    }
+    fn encode_pieces(&self, sink: &mut dyn FnMut(&[u8])) -> Result<(), String> {
+        postcard::serialize_with_flavor(self, pieces::ToSink(sink))
             .map_err(|e| format!("a {} payload: {e}", M::NAME))
     }
     fn eq_dyn(&self, other: &dyn DynMessage) -> bool {
@@ -691,6 +732,16 @@ impl MsgData {
     /// `out` is shorter than [`MsgData::encoded_len`].
     pub fn encode_into(&self, out: &mut [u8]) -> Result<usize, String> {
         self.value.encode_into(out)
+    }
+    /// Hand [`MsgData::to_bytes`]'s bytes to `sink` in order, piece by piece as they are
+    /// made: a field of bytes (an image's pixels) is one piece, its own bytes, so a sink can
+    /// tell a frame that already lies where it will cross (a lent buffer,
+    /// [`crate::pixels::PixelBuffer`]) by its address and pass it on without copying it.
+    ///
+    /// # Errors
+    /// Never for ratelab's own types (plain values); a message type whose `Serialize` fails.
+    pub fn encode_pieces(&self, sink: &mut dyn FnMut(&[u8])) -> Result<(), String> {
+        self.value.encode_pieces(sink)
     }
     /// One line for people: `force: newtons=1.5 N`; text quoted, bytes counted
     /// (`data=<307200 bytes>`).
@@ -763,6 +814,8 @@ trait ErasedTopic: Send + Sync + fmt::Debug {
         origin: Option<Nanos>,
     ) -> bool;
     fn add_data_tap(&self, tap: DataTap);
+    fn set_lender(&self, lender: Arc<dyn crate::pixels::Lender>) -> bool;
+    fn lender(&self) -> Option<Arc<dyn crate::pixels::Lender>>;
     fn subscriptions(&self) -> Vec<AnyTopic>;
     fn subscription_stats(&self, now: Option<Nanos>) -> Vec<TopicStats>;
     fn save(&self) -> TopicSnapshot;
@@ -868,6 +921,12 @@ impl<M: Message> ErasedTopic for Arc<Subscription<M>> {
         self.add_tap(Box::new(move |m: &crate::topic::Message<M>| {
             tap(m.seq, m.stamp, m.origin_stamp, MsgData::new(m.data.clone()))
         }));
+    }
+    fn set_lender(&self, lender: Arc<dyn crate::pixels::Lender>) -> bool {
+        Subscription::set_lender(self, lender)
+    }
+    fn lender(&self) -> Option<Arc<dyn crate::pixels::Lender>> {
+        Subscription::lender(self).cloned()
     }
     fn subscriptions(&self) -> Vec<AnyTopic> {
         vec![AnyTopic(Arc::new(self.clone()))]
@@ -1024,6 +1083,13 @@ impl<M: Message> ErasedTopic for FanOut<M> {
     fn add_data_tap(&self, tap: DataTap) {
         // Every publish reaches every queue: the first sees each message once.
         self.queues[0].add_data_tap(tap);
+    }
+    fn set_lender(&self, lender: Arc<dyn crate::pixels::Lender>) -> bool {
+        // One publisher lends for every queue: the first keeps the lender.
+        Subscription::set_lender(&self.queues[0], lender)
+    }
+    fn lender(&self) -> Option<Arc<dyn crate::pixels::Lender>> {
+        Subscription::lender(&self.queues[0]).cloned()
     }
     fn subscriptions(&self) -> Vec<AnyTopic> {
         self.queues
@@ -1278,6 +1344,22 @@ impl AnyTopic {
     /// (see [`Subscription::add_tap`]).
     pub fn add_data_tap(&self, tap: DataTap) {
         self.0.add_data_tap(tap);
+    }
+
+    /// Lend its publisher's frames from `lender` from now on (a launch's process lends
+    /// buffers of its shared-memory pool for a topic that crosses to another process): false,
+    /// and nothing changed, when a lender was set before.
+    pub fn set_lender(&self, lender: Arc<dyn crate::pixels::Lender>) -> bool {
+        self.0.set_lender(lender)
+    }
+
+    /// `len` bytes for a frame its publisher is about to draw, every one 0 (ROS 2's loaned
+    /// message, rclcpp's `Publisher::borrow_loaned_message`): lent by the topic's lender when
+    /// it has one and a buffer to lend ([`AnyTopic::set_lender`]; a frame drawn there crosses
+    /// to another process without a copy), else memory of their own. Publish the frame as
+    /// an [`crate::pixels::ImageData`] made `from` it.
+    pub fn loan_pixels(&self, len: usize) -> crate::pixels::PixelBuffer {
+        crate::pixels::PixelBuffer::lent(self.0.lender().as_deref(), len)
     }
 }
 

@@ -91,13 +91,13 @@ pub const MAX_DIRECT_UNANSWERED_BYTES: usize = 256 * 1024;
 pub const SHM_REFERENCE_BYTES: usize = 64;
 const _: () = assert!(SHM_REFERENCE_BYTES <= MAX_DIRECT_BYTES);
 
-/// What `payload` takes on the wire, bytes: [`SHM_REFERENCE_BYTES`] for one buffer in shared
-/// memory (its bytes stay in the publisher's pool), else its length.
+/// What `payload` takes on the wire, bytes: [`SHM_REFERENCE_BYTES`] for its buffer in shared
+/// memory, if any ([`crate::shared_run`]: its bytes stay in the publisher's pool), and the
+/// length of the rest (a frame drawn into a lent buffer crosses beside its head).
 fn wire_bytes(payload: &ZBytes) -> usize {
-    if payload.as_shm().is_some() {
-        SHM_REFERENCE_BYTES
-    } else {
-        payload.len()
+    match crate::shared_run(payload).and_then(|i| payload.slices().nth(i)) {
+        Some(shared) => payload.len() - shared.len() + SHM_REFERENCE_BYTES,
+        None => payload.len(),
     }
 }
 
@@ -471,6 +471,20 @@ mod tests {
         assert_eq!(wire_bytes(&payload), SHM_REFERENCE_BYTES);
         // So a frame in shared memory takes the direct lane, however large.
         assert_eq!(Lane::default().hand_in(wire_bytes(&payload)), Route::Direct);
+        // A frame a node drew into a lent buffer crosses beside its head: the head is
+        // charged its length, the frame a reference.
+        let mut pieces = ZBytes::writer();
+        std::io::Write::write_all(&mut pieces, &[7u8; 30]).unwrap();
+        pieces.append(payload);
+        let pieces = pieces.finish();
+        assert_eq!(wire_bytes(&pieces), 30 + SHM_REFERENCE_BYTES);
+        assert_eq!(Lane::default().hand_in(wire_bytes(&pieces)), Route::Direct);
+        // Runs all shorter than the threshold (a sample fragmented over the socket) are
+        // charged their length.
+        let mut runs = ZBytes::writer();
+        runs.append(ZBytes::from(vec![0u8; 60_000]));
+        runs.append(ZBytes::from(vec![0u8; 60_000]));
+        assert_eq!(wire_bytes(&runs.finish()), 120_000);
     }
 
     #[test]

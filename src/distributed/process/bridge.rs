@@ -4,150 +4,14 @@
 //! holds back, [`Spill`]), and the receiving end of each inbound one (its subscription, the
 //! arrivals the lockstep waits for, its over-the-wire latency, the samples refused).
 //!
-//! A large sample (an image, a scan: [`SHM_THRESHOLD_BYTES`] or more) is written once,
-//! straight from the message into a buffer of the process's shared-memory pool
-//! ([`SharedPool`]), and read in place on arrival: its pixels stay a view of the shared
-//! buffer ([`shared_payload`]) unless the node must own a copy (issue 76).
+//! A large sample (an image, a scan) goes through the process's shared memory
+//! ([`super::shm`]): written once, by its node into a buffer the topic lent or from the
+//! message into the pool, and read in place on arrival (issue 76).
 
+use super::shm::{read_arrived, SharedPool};
 use super::*;
-use crate::wire::{SampleHead, SampleView};
-use crate::{SHM_POOL_BYTES, SHM_THRESHOLD_BYTES};
-use ratelab_core::msg::MsgData;
+use crate::wire::SampleHead;
 use zenoh::bytes::ZBytes;
-use zenoh::shm::{
-    Defragment, GarbageCollect, PosixShmProviderBackend, ShmProvider, ShmProviderBuilder, ZShmMut,
-};
-
-/// A process's shared-memory pool for its large samples: its own ([`SHM_POOL_BYTES`], made
-/// as the process starts when it publishes a topic whose message type has a field of bytes,
-/// else in the background when the first large sample is sent; Zenoh's copying of large payloads
-/// into a pool of its own is off, [`crate::open_session`]). A buffer returns to it only when
-/// no process holds it any more (Zenoh's safe garbage collection): a subscriber keeps a
-/// frame's buffer as long as it keeps the message, as its pixels ([`shared_payload`]), and
-/// the bytes must not change under it.
-pub(super) struct SharedPool {
-    /// Shared memory is on ([`crate::shared_memory`]).
-    enabled: bool,
-    /// The pool once made (`Some(None)`: it could not be made; large samples cross the
-    /// socket).
-    provider: Arc<std::sync::OnceLock<Option<ShmProvider<PosixShmProviderBackend>>>>,
-    /// Whether the pool is being made.
-    started: std::sync::atomic::AtomicBool,
-}
-
-impl SharedPool {
-    /// A pool, when `enabled` (shared memory on), made when first needed.
-    pub(super) fn new(enabled: bool) -> Arc<SharedPool> {
-        Arc::new(SharedPool {
-            enabled,
-            provider: Arc::default(),
-            started: std::sync::atomic::AtomicBool::new(false),
-        })
-    }
-
-    /// Make the pool now, on this thread (once, when shared memory is on): a process whose
-    /// outbound topics carry a field of bytes (an image) does so as it starts, before it says it is
-    /// ready ([`bridge_outbound`]), so that its first frame goes through shared memory
-    /// however long mapping [`SHM_POOL_BYTES`] takes on a loaded machine.
-    pub(super) fn make_now(&self) {
-        if self.enabled && !self.started.swap(true, Ordering::SeqCst) {
-            let _ = self.provider.set(Self::provider());
-        }
-    }
-
-    /// Start making the pool (once, when shared memory is on) off the caller's thread: a
-    /// tick's, which must not wait for the mapping.
-    fn make(&self) {
-        if !self.enabled || self.started.swap(true, Ordering::SeqCst) {
-            return;
-        }
-        let cell = self.provider.clone();
-        let made = std::thread::Builder::new()
-            .name("ratelab-shm-pool".into())
-            .spawn(move || {
-                let _ = cell.set(Self::provider());
-            });
-        if made.is_err() {
-            let _ = self.provider.set(None);
-        }
-    }
-
-    /// A new pool of [`SHM_POOL_BYTES`], or `None` (said once) when it cannot be made:
-    /// large samples then cross the socket.
-    fn provider() -> Option<ShmProvider<PosixShmProviderBackend>> {
-        let made = ShmProviderBuilder::default_backend(SHM_POOL_BYTES).wait();
-        if let Err(e) = &made {
-            eprintln!("[ratelab] no shared-memory pool ({e}): large samples cross the socket");
-        }
-        made.ok()
-    }
-
-    /// A buffer of `len` bytes in the pool, if it has room now: `None` when the sample is
-    /// small (under [`SHM_THRESHOLD_BYTES`], it crosses the socket), when shared memory is
-    /// off or the pool is still being made (the first large samples), or when the pool is
-    /// full even after reclaiming what every receiver has let go (never blocks: a tick must
-    /// not wait on a subscriber whose queue holds the pool's buffers; the sample then
-    /// crosses the socket).
-    fn buffer(&self, len: usize) -> Option<ZShmMut> {
-        if len < SHM_THRESHOLD_BYTES || !self.enabled {
-            return None;
-        }
-        let Some(provider) = self.provider.get() else {
-            self.make();
-            return None;
-        };
-        // Safe policies only: a buffer a receiver still holds is never reclaimed.
-        provider
-            .as_ref()?
-            .alloc(len)
-            .with_policy::<Defragment<GarbageCollect>>()
-            .wait()
-            .ok()
-    }
-
-    /// The sample of `head` and `data` (its payload `payload_len` bytes,
-    /// [`MsgData::encoded_len`]), written once: into a buffer of the pool when
-    /// [`SharedPool::buffer`] gives one, else into bytes of its own; with its length.
-    /// `None` only if `payload_len` is not the payload's length.
-    fn written(
-        &self,
-        head: &SampleHead,
-        data: &MsgData,
-        payload_len: usize,
-    ) -> Option<(ZBytes, usize)> {
-        let len = head.sample_len(payload_len);
-        if let Some(mut shared) = self.buffer(len) {
-            let written = head.write(data, payload_len, &mut shared);
-            return written.ok().map(|()| (shared.into(), len));
-        }
-        let mut own = vec![0; len];
-        let written = head.write(data, payload_len, &mut own);
-        written.ok().map(|()| (own.into(), len))
-    }
-}
-
-/// A sample that arrived in shared memory as bytes that keep its buffer mapped, so that the
-/// message's pixels can be a view of it ([`SampleView::deliver`]); `None` for any other
-/// sample (through the socket, in a receive batch Zenoh reuses: its pixels are copied).
-/// Only a launch's processes may put on a topic's key (its access control), and each writes
-/// into a [`SharedPool`], whose buffers are never reclaimed while held: a view stays valid.
-pub(super) fn shared_payload(payload: &ZBytes) -> Option<bytes::Bytes> {
-    payload.as_shm()?;
-    let mut slices = payload.slices();
-    match (slices.next(), slices.next()) {
-        (Some(_), None) => Some(bytes::Bytes::from_owner(OneSlice(payload.clone()))),
-        _ => None,
-    }
-}
-
-/// A payload of one run of bytes, as [`bytes::Bytes::from_owner`] takes it.
-struct OneSlice(ZBytes);
-
-impl AsRef<[u8]> for OneSlice {
-    fn as_ref(&self) -> &[u8] {
-        self.0.slices().next().unwrap_or_default()
-    }
-}
 
 /// One crossing topic's sending end in its publisher's process: the bridge element that
 /// puts each message on the wire as it is published, from the topic's tap, under the topic's
@@ -490,28 +354,23 @@ pub(super) fn subscribe_inbound(
                 .callback(move |s| {
                     // Read in place: from the shared buffer itself when it came through
                     // shared memory (its pixels then a view of it), else from Zenoh's bytes.
-                    let shared = shared_payload(s.payload());
-                    let copied;
-                    let bytes: &[u8] = match &shared {
-                        Some(shared) => shared,
-                        None => {
-                            copied = s.payload().to_bytes();
-                            &copied
-                        }
-                    };
-                    let sample = match SampleView::decode(bytes) {
-                        Ok(sample) => sample,
+                    let read = read_arrived(s.payload(), |sample, shared| -> Result<_, String> {
+                        let sample = sample?;
+                        let offset = &mut ratelab_runtime::graph::lock(&offset);
+                        sample.deliver(&topic, offset, shared)?;
+                        let drawn = matches!(sample.data, wire::Payload::Pieces { .. });
+                        let in_place = (shared.is_some(), shared.is_some() && drawn);
+                        Ok((sample.head.seq, sample.head.sent_mono_ns, in_place))
+                    });
+                    let (seq, sent, in_place) = match read {
+                        Ok(read) => read,
                         Err(e) => return refusals.note(&process, topic.name(), &e),
                     };
-                    let (seq, sent) = (sample.head.seq, sample.head.sent_mono_ns);
-                    let offset = &mut ratelab_runtime::graph::lock(&offset);
-                    if let Err(e) = sample.deliver(&topic, offset, shared.as_ref()) {
-                        return refusals.note(&process, topic.name(), &e);
-                    }
                     let took = wire::mono_now_ns().saturating_sub(sent);
                     let mut got = ratelab_runtime::graph::lock(&lat[i]);
                     got.latency.record(Nanos(took));
-                    got.in_place += u64::from(shared.is_some());
+                    got.in_place += u64::from(in_place.0);
+                    got.drawn_in_place += u64::from(in_place.1);
                     drop(got);
                     {
                         let mut seqs = ratelab_runtime::graph::lock(&arrivals.seqs);
@@ -590,7 +449,14 @@ pub(super) fn bridge_outbound(
     // twice in a tick sends both, as in one process. The publishing tick's report then
     // names the newest seq sent, which a process reading the topic under the virtual clock
     // waits for.
+    //
+    // A topic whose frames may be large lends its publisher buffers of the pool to draw
+    // them into ([`ratelab_core::msg::AnyTopic::loan_pixels`]): a frame drawn there crosses
+    // without a copy.
     for t in (0..bridge.outlets.len()).filter(|&t| bridge.outlets[t].is_some()) {
+        if may_be_large(TopicId(t)) && pool.enabled() {
+            handles.topic(TopicId(t)).set_lender(pool.clone());
+        }
         let bridge = bridge.clone();
         handles
             .topic(TopicId(t))
@@ -609,8 +475,11 @@ pub(super) struct Received {
     /// Each sample's time on the wire.
     pub(super) latency: LatencyStats,
     /// Samples that arrived in shared memory and were read there, in place
-    /// ([`shared_payload`]).
+    /// ([`read_arrived`]).
     pub(super) in_place: u64,
+    /// Of those, the samples whose frame was the buffer its publisher's node drew into
+    /// (they arrived in pieces, [`wire::Payload::Pieces`]).
+    pub(super) drawn_in_place: u64,
 }
 
 /// The over-the-wire latency of each inbound topic so far (µs, to 0.1); `lat` holds one
@@ -640,6 +509,7 @@ pub(super) fn wire_links(
                 p99_us: us(l.quantile(0.99)),
                 max_us: us(l.max()),
                 in_place: got.in_place,
+                drawn_in_place: got.drawn_in_place,
                 since_ns: None,
             }
         })
@@ -673,143 +543,5 @@ impl Refusals {
         {
             eprintln!("[ratelab] {process}: {topic}: refused {reason} ({n} refused so far)");
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use ratelab_core::msg::{AnyTopic, ImageMsg, Message};
-
-    /// A plain Zenoh session on this host (no TLS), with shared memory as ratelab's.
-    fn session(listen: &[String], connect: &[String]) -> zenoh::Session {
-        let mut config = zenoh::Config::default();
-        let json = |v: &[String]| serde_json::to_string(v).unwrap();
-        for (key, value) in [
-            ("listen/endpoints", json(listen)),
-            ("connect/endpoints", json(connect)),
-            ("scouting/multicast/enabled", "false".into()),
-            ("transport/shared_memory/enabled", "true".into()),
-            // As ratelab's sessions: only what a process writes into its pool goes through
-            // shared memory, never Zenoh's own copy.
-            (
-                "transport/shared_memory/transport_optimization/enabled",
-                "false".into(),
-            ),
-        ] {
-            config.insert_json5(key, &value).expect("a Zenoh setting");
-        }
-        zenoh::open(config).wait().expect("a session")
-    }
-
-    /// A camera's frame crosses from one session to another without a copy of its pixels on
-    /// arrival: the receiver's message holds a view of the shared buffer the sender wrote the
-    /// sample into, once, straight from the message. A small message still crosses the
-    /// socket.
-    #[test]
-    fn a_large_message_is_written_into_shared_memory_once_and_read_in_place() {
-        let port = std::net::TcpListener::bind("127.0.0.1:0")
-            .and_then(|l| l.local_addr())
-            .expect("a free port")
-            .port();
-        let endpoint = format!("tcp/127.0.0.1:{port}");
-        let far = session(std::slice::from_ref(&endpoint), &[]);
-        let near = session(&[], std::slice::from_ref(&endpoint));
-        let topic = AnyTopic::new("/image", ImageMsg::TYPE, 4).unwrap();
-        let (tx, rx) = crossbeam_channel::unbounded();
-        let t = topic.clone();
-        let offset = Mutex::new(None);
-        let _sub = far
-            .declare_subscriber("t/image")
-            .callback(move |s| {
-                let shared = shared_payload(s.payload());
-                let bytes = s.payload().to_bytes().into_owned();
-                let read = match &shared {
-                    Some(b) => SampleView::decode(b),
-                    None => SampleView::decode(&bytes),
-                };
-                let view = read.expect("a sample");
-                let offset = &mut ratelab_runtime::graph::lock(&offset);
-                view.deliver(&t, offset, shared.as_ref())
-                    .expect("delivered");
-                let data = t.read(Nanos(u64::MAX / 2)).expect("published").data;
-                let _ = tx.send((view.head.seq, shared, data));
-            })
-            .wait()
-            .expect("a subscriber");
-        let publisher = near.declare_publisher("t/image").wait().unwrap();
-        let deadline = Instant::now() + Duration::from_secs(20);
-        while !publisher
-            .matching_status()
-            .wait()
-            .is_ok_and(|m| m.matching())
-        {
-            assert!(Instant::now() < deadline, "the subscriber was never seen");
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        let pool = SharedPool::new(true);
-        let frame = |seq: u64| {
-            let pixels: Vec<u8> = (0..640 * 480u32).map(|i| (i as u64 + seq) as u8).collect();
-            MsgData::new(ImageMsg {
-                height: 480,
-                width: 640,
-                encoding: "mono8".into(),
-                step: 640,
-                data: pixels.into(),
-            })
-        };
-        // The pool is made when first asked, in the background: until it is ready the
-        // frames cross the socket (and still arrive).
-        let mut seq = 0;
-        let (sent, got) = loop {
-            assert!(Instant::now() < deadline, "the pool was never ready");
-            let data = frame(seq);
-            let head = SampleHead {
-                seq,
-                stamp_ns: seq,
-                origin_ns: None,
-                sent_mono_ns: wire::mono_now_ns(),
-            };
-            let (bytes, _) = pool
-                .written(&head, &data, data.encoded_len())
-                .expect("written");
-            let in_pool = bytes.as_shm().is_some();
-            publisher.put(bytes).wait().unwrap();
-            let got = rx.recv_timeout(Duration::from_secs(10)).expect("arrived");
-            assert_eq!(got.0, seq);
-            assert_eq!(got.2, data, "the frame, whole");
-            if in_pool {
-                break (data, got);
-            }
-            seq += 1;
-            std::thread::sleep(Duration::from_millis(50));
-        };
-        let (_, shared, data) = got;
-        let shared = shared.expect("the frame arrived in shared memory");
-        let img = data.get::<ImageMsg>().unwrap();
-        assert!(
-            img.data.is_within(&shared),
-            "the pixels are a view of the shared buffer"
-        );
-        assert!(!img.data.shares(&sent.get::<ImageMsg>().unwrap().data));
-        // A small message (a force) is not put in the pool: it crosses the socket.
-        let force = MsgData::new(ratelab_core::msg::ForceMsg { newtons: 1.0 });
-        let head = SampleHead {
-            seq: 0,
-            stamp_ns: 0,
-            origin_ns: None,
-            sent_mono_ns: 0,
-        };
-        let (small, _) = pool.written(&head, &force, force.encoded_len()).unwrap();
-        assert!(small.as_shm().is_none());
-        // With shared memory off, nothing is put in a pool.
-        let big = frame(0);
-        let off = SharedPool::new(false);
-        assert!(off.buffer(head.sample_len(big.encoded_len())).is_none());
-        let (own, len) = off.written(&head, &big, big.encoded_len()).unwrap();
-        assert!(own.as_shm().is_none());
-        assert_eq!(len, head.sample_len(big.encoded_len()));
-        // A payload length that is not the payload's writes nothing.
-        assert!(off.written(&head, &big, big.encoded_len() + 1).is_none());
     }
 }

@@ -26,8 +26,9 @@ pub use launcher_to_process::{decode_relayed, encode_relayed, Setup, ToProcess, 
 pub use launcher_to_watcher::RunOver;
 pub use process_to_launcher::{ToLauncher, WireLink};
 pub use process_to_process::{
-    decode_reports, encode_reports, SampleHead, SampleView, Ticked, WireSample, MAX_SAMPLE_BYTES,
-    MAX_SENT_PER_TICK, MAX_SEQ, MAX_SEQ_JUMP, MAX_TICKS_PER_MESSAGE, MAX_TICK_BYTES,
+    decode_reports, encode_reports, Payload, SampleHead, SampleView, Ticked, WireSample,
+    MAX_SAMPLE_BYTES, MAX_SENT_PER_TICK, MAX_SEQ, MAX_SEQ_JUMP, MAX_TICKS_PER_MESSAGE,
+    MAX_TICK_BYTES,
 };
 
 use serde::{Deserialize, Serialize};
@@ -241,8 +242,12 @@ mod tests {
             let arrived = bytes::Bytes::from(out);
             let view = SampleView::decode(&arrived).unwrap();
             assert_eq!(view.head, head);
-            assert_eq!(view.data, &payload.to_bytes()[..]);
-            assert!(arrived.as_ptr_range().contains(&view.data.as_ptr()));
+            let wire = payload.to_bytes();
+            assert_eq!(view.data, Payload::One(&wire));
+            let Payload::One(data) = view.data else {
+                unreachable!("one run")
+            };
+            assert!(arrived.as_ptr_range().contains(&data.as_ptr()));
             // Delivered with its buffer, an image's pixels are a view of it; without, a copy.
             let t = AnyTopic::new("/t", payload.msg_type(), 2).unwrap();
             let mut off = None;

@@ -81,6 +81,12 @@ pub struct WireLink {
     /// made before it was counted.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub in_place: u64,
+    /// Of [`WireLink::in_place`], those whose frame crossed as its publisher's node drew it:
+    /// in the buffer the topic lent the node (`ratelab_core::msg::AnyTopic::loan_pixels`),
+    /// never copied between the drawing and the subscriber. 0 when none did; absent from a
+    /// report made before it was counted.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub drawn_in_place: u64,
     /// Set by the launcher when the receiving process rejoined mid-run: the run time of its
     /// rejoin, ns. Its figures count from then (the process before it took its own with it).
     #[serde(default, skip_serializing_if = "Option::is_none")]

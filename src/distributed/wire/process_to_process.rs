@@ -54,6 +54,12 @@ impl SampleHead {
         postcard::experimental::serialized_size(&(self, payload_len)).unwrap_or(0)
     }
 
+    /// The bytes before a payload of `payload_len` bytes: the head, then the payload's
+    /// length (a sample written in pieces, its payload after them, [`Payload::Pieces`]).
+    pub fn head_bytes(&self, payload_len: usize) -> Vec<u8> {
+        postcard::to_allocvec(&(self, payload_len)).unwrap_or_default()
+    }
+
     /// Write the sample of this head and `payload` (`payload_len` bytes encoded,
     /// [`MsgData::encoded_len`]) into `out`, which must be exactly [`SampleHead::sample_len`]
     /// long (a shared-memory buffer, so that a large message is written once, straight from
@@ -86,6 +92,17 @@ impl SampleHead {
     }
 }
 
+/// A sample of `len` bytes may be read: at most [`MAX_SAMPLE_BYTES`].
+fn check_sample_len(len: usize) -> Result<(), String> {
+    if len > MAX_SAMPLE_BYTES {
+        return Err(limits::refusal(
+            format_args!("a sample of {len} bytes (at most {MAX_SAMPLE_BYTES})"),
+            "MAX_SAMPLE_BYTES",
+        ));
+    }
+    Ok(())
+}
+
 /// One topic sample on the wire, owning its payload: its [`SampleHead`], then the payload.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct WireSample {
@@ -100,13 +117,82 @@ pub struct WireSample {
 }
 
 /// One topic sample read in place: its head, and its payload borrowed from the bytes that
-/// arrived ([`SampleView::decode`]), not copied.
-#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+/// arrived ([`SampleView::decode`], [`SampleView::decode_pieces`]), not copied.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SampleView<'a> {
     /// Its numbers and stamps.
     pub head: SampleHead,
     /// The payload, as in [`WireSample::data`].
-    pub data: &'a [u8],
+    pub data: Payload<'a>,
+}
+
+/// A sample's payload as it arrived: one run of bytes, or the rest of the run its head came
+/// in followed by further runs (a frame that crossed in a shared-memory buffer of its own
+/// beside its head, written by its publisher's node straight into a buffer it was lent).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Payload<'a> {
+    /// One run of bytes.
+    One(&'a [u8]),
+    /// Several, in order: the bytes after the head in its run, then the runs after it.
+    Pieces {
+        /// The bytes after the head, in the run the head came in.
+        first: &'a [u8],
+        /// The runs after it.
+        rest: &'a [&'a [u8]],
+    },
+}
+
+impl Payload<'_> {
+    /// Its bytes in all.
+    pub fn len(&self) -> usize {
+        match self {
+            Payload::One(b) => b.len(),
+            Payload::Pieces { first, rest } => {
+                first.len() + rest.iter().map(|p| p.len()).sum::<usize>()
+            }
+        }
+    }
+
+    /// Whether it has no bytes.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Its bytes as one run (copied).
+    pub fn to_vec(&self) -> Vec<u8> {
+        match self {
+            Payload::One(b) => b.to_vec(),
+            Payload::Pieces { first, rest } => {
+                let mut all = Vec::with_capacity(self.len());
+                all.extend_from_slice(first);
+                rest.iter().for_each(|p| all.extend_from_slice(p));
+                all
+            }
+        }
+    }
+
+    /// The message it holds, of type `ty`: read in pieces where it came in pieces (a field
+    /// of bytes borrowed from the run it lies in), or, should a field straddle two runs
+    /// (no ratelab process writes one so), from the runs joined.
+    fn decode(&self, ty: ratelab_core::msg::MsgType) -> Result<MsgData, String> {
+        match self {
+            Payload::One(b) => ty.decode(b),
+            Payload::Pieces { first, rest } => {
+                let mut pieces = Vec::with_capacity(rest.len() + 1);
+                pieces.push(*first);
+                pieces.extend_from_slice(rest);
+                ty.decode_pieces(&pieces)
+                    .or_else(|_| ty.decode(&self.to_vec()))
+            }
+        }
+    }
+}
+
+/// A sample as postcard reads it in one run: its head and its payload, borrowed.
+#[derive(Deserialize)]
+struct OneRun<'a> {
+    head: SampleHead,
+    data: &'a [u8],
 }
 
 impl<'a> SampleView<'a> {
@@ -117,23 +203,49 @@ impl<'a> SampleView<'a> {
     /// # Errors
     /// One line.
     pub fn decode(bytes: &'a [u8]) -> Result<SampleView<'a>, String> {
-        if bytes.len() > MAX_SAMPLE_BYTES {
-            return Err(limits::refusal(
-                format_args!(
-                    "a sample of {} bytes (at most {MAX_SAMPLE_BYTES})",
-                    bytes.len()
-                ),
-                "MAX_SAMPLE_BYTES",
+        check_sample_len(bytes.len())?;
+        let s: OneRun<'a> = decode_exact(bytes, MAX_SAMPLE_BYTES, "sample")?;
+        SampleView {
+            head: s.head,
+            data: Payload::One(s.data),
+        }
+        .checked()
+    }
+
+    /// Read a sample that arrived in several runs of bytes, in order (its head and a frame
+    /// in a shared-memory buffer of its own, [`Payload::Pieces`]), in place: as
+    /// [`SampleView::decode`] of the runs joined, without joining them. The head must lie
+    /// in the first run.
+    ///
+    /// # Errors
+    /// As [`SampleView::decode`]; a head that does not fit in the first run.
+    pub fn decode_pieces(pieces: &'a [&'a [u8]]) -> Result<SampleView<'a>, String> {
+        let Some((&first, rest)) = pieces.split_first() else {
+            return Err("an empty sample".into());
+        };
+        let len = first.len() + rest.iter().map(|p| p.len()).sum::<usize>();
+        check_sample_len(len)?;
+        let ((head, payload_len), first): ((SampleHead, usize), &[u8]) =
+            postcard::take_from_bytes(first).map_err(|e| format!("a malformed sample: {e}"))?;
+        let data = Payload::Pieces { first, rest };
+        if payload_len != data.len() {
+            return Err(format!(
+                "a malformed sample: a payload of {payload_len} bytes in {}",
+                data.len()
             ));
         }
-        let s: SampleView<'a> = decode_exact(bytes, MAX_SAMPLE_BYTES, "sample")?;
-        if s.head.seq > MAX_SEQ {
+        SampleView { head, data }.checked()
+    }
+
+    /// Itself, or why its `seq` is refused.
+    fn checked(self) -> Result<SampleView<'a>, String> {
+        if self.head.seq > MAX_SEQ {
             return Err(format!(
                 "a sample numbered {} (at most {MAX_SEQ})",
-                s.head.seq
+                self.head.seq
             ));
         }
-        Ok(s)
+        Ok(self)
     }
 
     /// Publish this sample into the local copy `topic` of its topic, as its publisher did.
@@ -145,9 +257,9 @@ impl<'a> SampleView<'a> {
     /// [`MAX_SEQ_JUMP`] ahead of the last is refused, not counted as lost: no publisher gets
     /// that far ahead of its subscriber in a run, and a forged number must not inflate `lost`.
     ///
-    /// `arrived`, the buffer the sample was read from when it can be shared (a shared-memory
-    /// sample's), lets the message's pixels be a view of it rather than a copy
-    /// ([`ratelab_core::pixels::decode_within`]); `None` copies them.
+    /// `arrived`, the buffer the sample (or, in pieces, its frame) was read from when it can
+    /// be shared (a shared-memory buffer's), lets the message's pixels be a view of it rather
+    /// than a copy ([`ratelab_core::pixels::decode_within`]); `None` copies them.
     ///
     /// # Errors
     /// The payload's type is not the topic's (a graph that differs between processes), or its
@@ -162,7 +274,7 @@ impl<'a> SampleView<'a> {
         let stamp = Nanos(head.stamp_ns);
         let origin = head.origin_ns.map(Nanos);
         let seq = i128::from(head.seq);
-        let decode = || topic.msg_type().decode(self.data);
+        let decode = || self.data.decode(topic.msg_type());
         let data = match arrived {
             Some(buffer) => ratelab_core::pixels::decode_within(buffer, decode),
             None => decode(),
@@ -201,7 +313,7 @@ impl WireSample {
     pub fn view(&self) -> SampleView<'_> {
         SampleView {
             head: self.head,
-            data: &self.data,
+            data: Payload::One(&self.data),
         }
     }
 

@@ -11,8 +11,9 @@
 pub use super::frame::{FrameGeometry, CART_HALF_M, POLE_LENGTH_M, SHADES};
 use crate::graph::kind::{Code, KindDef, NodeContext, ParamDef, Params, Plant};
 use crate::plant::{lock, SharedPlant};
-use ratelab_core::msg::ImageMsg;
+use ratelab_core::msg::{AnyTopic, ImageMsg};
 use ratelab_core::node::NodeState;
+use ratelab_core::pixels::PixelBuffer;
 use ratelab_core::ports::RustNode;
 use ratelab_core::time::Nanos;
 
@@ -112,6 +113,7 @@ fn make(cx: &NodeContext<'_>, plant: &SharedPlant) -> Result<Camera, String> {
         plant: plant.clone(),
         geometry,
         render,
+        out: cx.outputs.first().cloned(),
     })
 }
 
@@ -125,6 +127,11 @@ pub struct Camera {
     pub geometry: FrameGeometry,
     /// MuJoCo's renderer (`mujoco = 1` on a machine that renders): `None` draws the frame.
     pub render: Option<super::camera_render::Render>,
+    /// Its topic, which lends the buffer a drawn frame is drawn into
+    /// ([`ratelab_core::msg::AnyTopic::loan_pixels`]): in a launch whose frames cross to
+    /// another process, a buffer of the process's shared-memory pool, so the frame is
+    /// written once, here. `None` (no topic): memory of its own.
+    pub out: Option<AnyTopic>,
 }
 
 impl RustNode for Camera {
@@ -158,7 +165,16 @@ impl RustNode for Camera {
         };
         let frame = match rendered {
             Some(px) => self.geometry.frame_of(px),
-            None => self.geometry.frame(state.cart_pos, state.theta),
+            None => {
+                let len = self.geometry.bytes();
+                let mut px = match &self.out {
+                    Some(topic) => topic.loan_pixels(len),
+                    None => PixelBuffer::zeroed(len),
+                };
+                self.geometry
+                    .draw_into(&mut px, state.cart_pos, state.theta);
+                self.geometry.frame_of(px)
+            }
         };
         Some(frame)
     }

@@ -5,6 +5,7 @@
 //! reads frames back through it.
 
 use ratelab_core::msg::ImageMsg;
+use ratelab_core::pixels::ImageData;
 
 /// Where a frame of `width` × `height` draws the world: the rail along the bottom, the
 /// hinge on it, metres to pixels at one scale both ways (6 m of rail across, the 1 m pole
@@ -65,8 +66,24 @@ impl FrameGeometry {
     /// A frame of the cart at `cart_pos_m` with its pole at `theta_rad` (from upright,
     /// positive toward +x), `mono8`, row after row.
     pub fn draw(&self, cart_pos_m: f64, theta_rad: f64) -> Vec<u8> {
+        let mut px = vec![0u8; self.bytes()];
+        self.draw_into(&mut px, cart_pos_m, theta_rad);
+        px
+    }
+
+    /// The bytes of a frame, `mono8`: width × height.
+    pub fn bytes(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+
+    /// [`FrameGeometry::draw`] into `px`, which must be [`FrameGeometry::bytes`] long with
+    /// every byte 0 (a buffer the frame's topic lent, [`ratelab_core::msg::AnyTopic::loan_pixels`]);
+    /// nothing is drawn into one of another length.
+    pub fn draw_into(&self, px: &mut [u8], cart_pos_m: f64, theta_rad: f64) {
         let (w, h) = (self.width as usize, self.height as usize);
-        let mut px = vec![0u8; w * h];
+        if px.len() != w * h {
+            return;
+        }
         let s = self.scale;
         let (rail, cart, pole) = SHADES;
         // The rail: a row under the cart.
@@ -114,7 +131,6 @@ impl FrameGeometry {
                 *p = (*p).max(v);
             }
         }
-        px
     }
 
     /// The frame as a message.
@@ -123,7 +139,7 @@ impl FrameGeometry {
     }
 
     /// A frame of this size holding `px` (`mono8`, row after row from the top).
-    pub fn frame_of(&self, px: Vec<u8>) -> ImageMsg {
+    pub fn frame_of(&self, px: impl Into<ImageData>) -> ImageMsg {
         ImageMsg {
             height: self.height,
             width: self.width,
