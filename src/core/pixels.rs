@@ -11,8 +11,8 @@
 //! A node that makes a large frame can draw it straight into the buffer it will cross in:
 //! its output topic lends one ([`PixelBuffer`], from the topic's [`Lender`]: a launch's
 //! process lends buffers of its shared-memory pool), as ROS 2 lends a publisher's message
-//! (rclcpp's `Publisher::borrow_loaned_message`). The frame is then written once, by the
-//! node, and never copied on its way to another process.
+//! (rclcpp's `Publisher::borrow_loaned_message`). The frame is then drawn where it will
+//! cross (after the buffer is zeroed), and never copied on its way to another process.
 
 use bytes::Bytes;
 use serde::{Deserialize, Serialize};
@@ -63,11 +63,12 @@ impl From<&[u8]> for ImageData {
 /// Where a topic's frames may be drawn before they are published ([`PixelBuffer::lent`]):
 /// a launch's process lends buffers of its shared-memory pool for a topic that crosses to
 /// another process, so that the frame crosses without a copy. Set on a topic with
-/// `AnyTopic::set_lender`.
+/// [`crate::msg::AnyTopic::set_lender`].
 pub trait Lender: Send + Sync {
-    /// A buffer of `len` bytes, every one 0, or `None` when there is none to lend now (the
-    /// frame is too small to be worth it, the pool is full or not made yet): the node then
-    /// draws into memory of its own, and the frame is copied once on its way out.
+    /// A buffer of `len` bytes (what it holds does not matter: [`PixelBuffer::lent`] zeroes
+    /// it), or `None` when there is none to lend now (the frame is too small to be worth it,
+    /// the pool is full or not made yet): the node then draws into memory of its own, and
+    /// the frame is copied once on its way out.
     fn lend(&self, len: usize) -> Option<Box<dyn LentPixels>>;
 }
 
@@ -99,11 +100,15 @@ impl PixelBuffer {
         PixelBuffer(Drawn::Own(vec![0; len]))
     }
 
-    /// `len` bytes, every one 0: lent by `lender` when it has a buffer to lend, else
-    /// [`PixelBuffer::zeroed`].
+    /// `len` bytes, every one 0: lent by `lender` when it has a buffer of that length to
+    /// lend (zeroed here: a pool's buffer may hold an earlier frame, and a frame must not
+    /// depend on where it was drawn), else [`PixelBuffer::zeroed`].
     pub fn lent(lender: Option<&dyn Lender>, len: usize) -> PixelBuffer {
         match lender.and_then(|l| l.lend(len)) {
-            Some(buf) if buf.bytes().len() == len => PixelBuffer(Drawn::Lent(buf)),
+            Some(mut buf) if buf.bytes().len() == len => {
+                buf.bytes_mut().fill(0);
+                PixelBuffer(Drawn::Lent(buf))
+            }
             _ => PixelBuffer::zeroed(len),
         }
     }
@@ -269,8 +274,8 @@ mod tests {
         assert!(a.shares(&a.clone()) && !a.shares(&b));
     }
 
-    /// A lender of buffers of its own, each `len` bytes of 0xAA (then zeroed, as a lender
-    /// must), or `wrong` bytes long.
+    /// A lender of buffers of its own, each `len` bytes of 0xAA (as a pool's buffer may
+    /// hold an earlier frame), or `wrong` bytes long.
     struct Lends {
         wrong: Option<usize>,
     }
@@ -291,9 +296,7 @@ mod tests {
 
     impl Lender for Lends {
         fn lend(&self, len: usize) -> Option<Box<dyn LentPixels>> {
-            let mut b = vec![0xAA; self.wrong.unwrap_or(len)];
-            b.fill(0);
-            Some(Box::new(Lent(b)))
+            Some(Box::new(Lent(vec![0xAA; self.wrong.unwrap_or(len)])))
         }
     }
 
@@ -301,7 +304,11 @@ mod tests {
     fn a_frame_drawn_into_a_lent_buffer_is_published_without_a_copy() {
         let lender = Lends { wrong: None };
         let mut px = PixelBuffer::lent(Some(&lender), 6);
-        assert!(px.is_lent() && px.len() == 6 && px.iter().all(|&b| b == 0));
+        assert!(px.is_lent() && px.len() == 6);
+        assert!(
+            px.iter().all(|&b| b == 0),
+            "zeroed, whatever the buffer held"
+        );
         px[2] = 9;
         let at = px.as_ptr();
         let img = ImageData::from(px);

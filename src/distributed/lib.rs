@@ -558,16 +558,24 @@ pub const SHM_THRESHOLD_BYTES: usize = 64 * 1024;
 /// since Zenoh's receive batches are shorter than 64 KiB and a sample fragmented across
 /// them arrives in runs of theirs). For a payload that arrived, not one made locally.
 pub(crate) fn shared_run(payload: &zenoh::bytes::ZBytes) -> Option<usize> {
-    if payload.as_shm().is_some() {
-        return Some(0);
-    }
-    let mut runs = payload.slices();
-    runs.next()?;
-    runs.next()?;
+    shared_runs(payload).next()
+}
+
+/// Every run of a payload that arrived through Zenoh that is a buffer in shared memory, as
+/// [`shared_run`] tells them (a message with two lent frames has two).
+pub(crate) fn shared_runs(payload: &zenoh::bytes::ZBytes) -> impl Iterator<Item = usize> + '_ {
+    let one = payload.as_shm().is_some();
+    let several = payload.slices().nth(1).is_some();
     payload
         .slices()
-        .position(|run| run.len() >= SHM_THRESHOLD_BYTES)
+        .enumerate()
+        .filter(move |(i, run)| (one && *i == 0) || (several && run.len() >= SHM_THRESHOLD_BYTES))
+        .map(|(i, _)| i)
 }
+
+// What [`shared_run`] rests on: Zenoh's receive batches are at most `u16::MAX` bytes (its
+// batch size is a u16), so no run that arrived in one reaches the threshold.
+const _: () = assert!(SHM_THRESHOLD_BYTES > u16::MAX as usize);
 
 /// The size of a process's shared-memory pool, bytes (Zenoh's default pool size): made
 /// before the run by a process whose outbound topics have a field of bytes, else when the
@@ -756,7 +764,7 @@ fn open_as(
             shared_memory()?.to_string(),
         ),
         // Zenoh's own copying of large payloads into its pool is off: a process writes its
-        // large samples into a pool of its own (process/bridge.rs), which reclaims a buffer
+        // large samples into a pool of its own (process/shm.rs), which reclaims a buffer
         // only when no process holds it. Zenoh's implicit copy allocates with an unsafe
         // garbage collection that may reclaim a buffer a stalled receiver still holds (its
         // watchdog lapsed: zenoh-transport's shm/interop.rs, `_wrap_in_place`; zenoh issue

@@ -42,6 +42,7 @@
 pub mod force;
 pub mod image;
 mod pieces;
+pub use pieces::PiecesError;
 pub mod position;
 pub mod ros_mapping;
 pub mod state;
@@ -217,7 +218,7 @@ pub struct MsgTypeInfo {
     type_id: fn() -> TypeId,
     new_topic: fn(&str, usize, TopicQos, u64, usize) -> Result<AnyTopic, ZeroDepth>,
     from_bytes: fn(&[u8]) -> Result<MsgData, String>,
-    from_pieces: fn(&[&[u8]]) -> Result<MsgData, String>,
+    from_pieces: fn(&[&[u8]]) -> Result<MsgData, PiecesError>,
     from_fields: fn(&[f64]) -> MsgData,
     from_values: fn(&[Value]) -> MsgData,
     ros2: fn() -> Option<RosCodec>,
@@ -288,25 +289,32 @@ fn from_bytes<M: Message>(bytes: &[u8]) -> Result<MsgData, String> {
     }
 }
 
-fn from_pieces<M: Message>(pieces: &[&[u8]]) -> Result<MsgData, String> {
+fn from_pieces<M: Message>(pieces: &[&[u8]]) -> Result<MsgData, PiecesError> {
     let len: usize = pieces.iter().map(|p| p.len()).sum();
     if len > MAX_PAYLOAD_BYTES {
-        return Err(format!(
+        return Err(PiecesError::Refused(format!(
             "a {} payload of {len} bytes (at most {MAX_PAYLOAD_BYTES})",
             M::NAME
-        ));
+        )));
     }
     let mut de = postcard::Deserializer::from_flavor(pieces::FromPieces::new(pieces));
     let decoded = M::deserialize(&mut de);
     // The flavor's finalize cannot fail.
-    let left = de.finalize().map_err(|e| e.to_string())?;
+    let left = de
+        .finalize()
+        .map_err(|e| PiecesError::Refused(e.to_string()))?;
     match decoded {
-        Err(_) if left.straddled => {
-            Err(format!("not a {} payload: {}", M::NAME, pieces::STRADDLES))
-        }
-        Err(e) => Err(format!("not a {} payload: {e}", M::NAME)),
+        Err(_) if left.straddled => Err(PiecesError::Straddles),
+        Err(e) => Err(PiecesError::Refused(format!(
+            "not a {} payload: {e}",
+            M::NAME
+        ))),
         Ok(m) if left.bytes == 0 => Ok(MsgData::new(m)),
-        Ok(_) => Err(format!("{} bytes after a {} payload", left.bytes, M::NAME)),
+        Ok(_) => Err(PiecesError::Refused(format!(
+            "{} bytes after a {} payload",
+            left.bytes,
+            M::NAME
+        ))),
     }
 }
 
@@ -360,9 +368,10 @@ impl MsgType {
     /// [`crate::pixels::decode_within`]).
     ///
     /// # Errors
-    /// As [`MsgType::decode`], and a field of bytes that straddles two pieces (the caller
-    /// may decode the pieces joined instead).
-    pub fn decode_pieces(self, pieces: &[&[u8]]) -> Result<MsgData, String> {
+    /// [`PiecesError::Refused`] as [`MsgType::decode`] refuses (one line);
+    /// [`PiecesError::Straddles`] when a run postcard reads whole (a field of bytes, a
+    /// string, a float) lies across two pieces: the caller may decode the pieces joined.
+    pub fn decode_pieces(self, pieces: &[&[u8]]) -> Result<MsgData, PiecesError> {
         (self.0.from_pieces)(pieces)
     }
     /// A payload of this type from its fields, in order (missing ones 0, extra ignored).

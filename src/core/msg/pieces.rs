@@ -28,10 +28,11 @@ impl SerFlavor for ToSink<'_> {
     }
 }
 
-/// Postcard's input from several runs of bytes, read in order. A run of bytes asked for
-/// whole (a field of bytes) must lie inside one piece, as [`MsgData::encode_pieces`]'s
-/// sinks keep a lent buffer's bytes; one that straddles two pieces is refused
-/// ([`STRADDLES`]), and the caller reads the pieces joined instead.
+/// Postcard's input from several runs of bytes, read in order. A run of bytes postcard
+/// asks for whole (a field of bytes, a string, a float) must lie inside one piece, as
+/// [`MsgData::encode_pieces`]'s sinks keep a lent buffer's bytes; one that straddles two
+/// pieces is refused ([`PiecesError::Straddles`]), and the caller reads the pieces joined
+/// instead.
 ///
 /// [`MsgData::encode_pieces`]: super::MsgData::encode_pieces
 pub(super) struct FromPieces<'de> {
@@ -51,8 +52,24 @@ pub(super) struct Left {
     pub(super) straddled: bool,
 }
 
-/// What [`FromPieces`] says of a run of bytes that straddles two pieces.
-pub(super) const STRADDLES: &str = "a run of bytes across two pieces";
+/// Why a payload in pieces was not read ([`MsgType::decode_pieces`](super::MsgType::decode_pieces)).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum PiecesError {
+    /// A run postcard reads whole (a field of bytes, a string, a float) lies across two
+    /// pieces: the pieces joined may still be read.
+    Straddles,
+    /// Refused, as in one run: too long, not this type, or bytes after its end (one line).
+    Refused(String),
+}
+
+impl std::fmt::Display for PiecesError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            PiecesError::Straddles => f.write_str("a run of bytes across two pieces"),
+            PiecesError::Refused(why) => f.write_str(why),
+        }
+    }
+}
 
 impl<'de> FromPieces<'de> {
     pub(super) fn new(pieces: &'de [&'de [u8]]) -> FromPieces<'de> {
@@ -164,12 +181,12 @@ mod tests {
         // A cut inside the pixels: refused as straddling, so the caller joins them.
         let cut: [&[u8]; 2] = [&wire[..at + 2], &wire[at + 2..]];
         let e = ImageMsg::TYPE.decode_pieces(&cut).unwrap_err();
-        assert!(e.contains(STRADDLES), "{e}");
+        assert_eq!(e, PiecesError::Straddles);
         // Too short, or bytes after the end: refused as in one run.
         let short: [&[u8]; 2] = [&wire[..at], &wire[at..wire.len() - 1]];
         assert!(ImageMsg::TYPE.decode_pieces(&short).is_err());
         let long: [&[u8]; 2] = [&wire, &[0]];
         let e = ImageMsg::TYPE.decode_pieces(&long).unwrap_err();
-        assert!(e.contains("1 bytes after"), "{e}");
+        assert!(e.to_string().contains("1 bytes after"), "{e}");
     }
 }

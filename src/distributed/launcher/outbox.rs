@@ -91,14 +91,12 @@ pub const MAX_DIRECT_UNANSWERED_BYTES: usize = 256 * 1024;
 pub const SHM_REFERENCE_BYTES: usize = 64;
 const _: () = assert!(SHM_REFERENCE_BYTES <= MAX_DIRECT_BYTES);
 
-/// What `payload` takes on the wire, bytes: [`SHM_REFERENCE_BYTES`] for its buffer in shared
-/// memory, if any ([`crate::shared_run`]: its bytes stay in the publisher's pool), and the
-/// length of the rest (a frame drawn into a lent buffer crosses beside its head).
+/// What `payload` takes on the wire, bytes: [`SHM_REFERENCE_BYTES`] for each of its buffers
+/// in shared memory ([`crate::shared_runs`]: their bytes stay in the publisher's pool), and
+/// the length of the rest (a frame drawn into a lent buffer crosses beside its head).
 fn wire_bytes(payload: &ZBytes) -> usize {
-    match crate::shared_run(payload).and_then(|i| payload.slices().nth(i)) {
-        Some(shared) => payload.len() - shared.len() + SHM_REFERENCE_BYTES,
-        None => payload.len(),
-    }
+    let runs: Vec<usize> = payload.slices().map(<[u8]>::len).collect();
+    crate::shared_runs(payload).fold(payload.len(), |n, i| n - runs[i] + SHM_REFERENCE_BYTES)
 }
 
 /// What `payload` is charged against [`MAX_QUEUED_BYTES`] (in shared memory or not: a

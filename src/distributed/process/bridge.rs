@@ -358,19 +358,19 @@ pub(super) fn subscribe_inbound(
                         let sample = sample?;
                         let offset = &mut ratelab_runtime::graph::lock(&offset);
                         sample.deliver(&topic, offset, shared)?;
-                        let drawn = matches!(sample.data, wire::Payload::Pieces { .. });
-                        let in_place = (shared.is_some(), shared.is_some() && drawn);
-                        Ok((sample.head.seq, sample.head.sent_mono_ns, in_place))
+                        let pieces = matches!(sample.data, wire::Payload::Pieces { .. });
+                        let (in_place, drawn) = (shared.is_some(), shared.is_some() && pieces);
+                        Ok((sample.head.seq, sample.head.sent_mono_ns, in_place, drawn))
                     });
-                    let (seq, sent, in_place) = match read {
+                    let (seq, sent, in_place, drawn) = match read {
                         Ok(read) => read,
                         Err(e) => return refusals.note(&process, topic.name(), &e),
                     };
                     let took = wire::mono_now_ns().saturating_sub(sent);
                     let mut got = ratelab_runtime::graph::lock(&lat[i]);
                     got.latency.record(Nanos(took));
-                    got.in_place += u64::from(in_place.0);
-                    got.drawn_in_place += u64::from(in_place.1);
+                    got.in_place += u64::from(in_place);
+                    got.drawn_in_place += u64::from(drawn);
                     drop(got);
                     {
                         let mut seqs = ratelab_runtime::graph::lock(&arrivals.seqs);

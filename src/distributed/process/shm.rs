@@ -28,7 +28,7 @@ use zenoh::shm::{
 /// else in the background when the first large sample is sent; Zenoh's copying of large payloads
 /// into a pool of its own is off, [`crate::open_session`]). A buffer returns to it only when
 /// no process holds it any more (Zenoh's safe garbage collection): a subscriber keeps a
-/// frame's buffer as long as it keeps the message, as its pixels ([`shared_payload`]), and
+/// frame's buffer as long as it keeps the message, as its pixels ([`read_arrived`]), and
 /// the bytes must not change under it.
 pub(super) struct SharedPool {
     /// Shared memory is on ([`crate::shared_memory`]).
@@ -147,13 +147,21 @@ impl SharedPool {
         written.ok().map(|()| (own.into(), len))
     }
 
-    /// The sample in pieces when `data` holds a frame lent from this pool: the head and the
-    /// bytes between frames in runs of their own, each frame the lent buffer itself (Zenoh
-    /// passes a shared-memory run of a sample by reference and the others by value,
-    /// `zenoh-codec`'s sliced `ZBuf`). `None` when it holds none (nothing is lent now, or
-    /// not this message's bytes), or its payload is not `payload_len` bytes.
+    /// The sample in pieces when `data` holds a frame lent from this pool: each frame the
+    /// lent buffer itself, and the bytes before, between and after the frames (the head
+    /// first) in runs of their own, copied (Zenoh passes a shared-memory run of a sample
+    /// by reference and the others by value, `zenoh-codec`'s sliced `ZBuf`). `None` when it
+    /// holds none (nothing is lent now, or not this message's bytes: found by a first walk
+    /// of the encoding, which copies nothing, so such a message is still written once), or
+    /// its payload is not `payload_len` bytes.
     fn in_pieces(&self, head: &SampleHead, data: &MsgData, payload_len: usize) -> Option<ZBytes> {
-        if payload_len < SHM_THRESHOLD_BYTES || lock(&self.lent).is_empty() {
+        if payload_len < SHM_THRESHOLD_BYTES || !self.lends_now() {
+            return None;
+        }
+        let mut holds = false;
+        data.encode_pieces(&mut |piece| holds |= self.lent_frame(piece).is_some())
+            .ok()?;
+        if !holds {
             return None;
         }
         let mut out = ZBytes::writer();
@@ -173,6 +181,14 @@ impl SharedPool {
         (frames > 0 && n == payload_len).then(|| out.finish())
     }
 
+    /// Whether a frame lent from the pool is still held (by a message being published, a
+    /// queue): the register's dead entries are let go here too.
+    fn lends_now(&self) -> bool {
+        let mut lent = lock(&self.lent);
+        lent.retain(|w| w.strong_count() > 0);
+        !lent.is_empty()
+    }
+
     /// The lent frame whose bytes `bytes` are (the same address and length), if any.
     fn lent_frame(&self, bytes: &[u8]) -> Option<ZShm> {
         if bytes.len() < SHM_THRESHOLD_BYTES {
@@ -187,11 +203,10 @@ impl SharedPool {
 }
 
 impl Lender for SharedPool {
-    /// A buffer of the pool, zeroed (it may hold an earlier frame), when [`SharedPool::buffer`]
-    /// gives one.
+    /// A buffer of the pool when [`SharedPool::buffer`] gives one (it may hold an earlier
+    /// frame: [`ratelab_core::pixels::PixelBuffer::lent`] zeroes it).
     fn lend(&self, len: usize) -> Option<Box<dyn LentPixels>> {
-        let mut buffer = self.buffer(len)?;
-        buffer.fill(0);
+        let buffer = self.buffer(len)?;
         Some(Box::new(Lending {
             buffer,
             lent: self.lent.clone(),
@@ -251,10 +266,19 @@ impl LentPixels for Lending {
 ///
 /// Only a launch's processes may put on a topic's key (its access control), and each writes
 /// into a [`SharedPool`], whose buffers are never reclaimed while held: a view stays valid.
+/// A view keeps the whole payload, so a frame that arrived in pieces also keeps the receive
+/// batch its head arrived in (Zenoh's API cannot split a payload; a batch is at most 64 KiB,
+/// and Zenoh makes another when its pool of them is empty): one per frame held, as in a
+/// queue or the zero-order hold.
+///
+/// A payload over [`crate::wire::MAX_SAMPLE_BYTES`] is refused before its runs are looked at.
 pub(super) fn read_arrived<R>(
     payload: &ZBytes,
     read: impl FnOnce(Result<SampleView<'_>, String>, Option<&bytes::Bytes>) -> R,
 ) -> R {
+    if let Err(e) = crate::wire::check_sample_len(payload.len()) {
+        return read(Err(e), None);
+    }
     let shared =
         crate::shared_run(payload).map(|i| bytes::Bytes::from_owner(NthSlice(payload.clone(), i)));
     let pieces: Vec<&[u8]> = payload.slices().collect();
@@ -445,6 +469,14 @@ mod tests {
             .unwrap();
         assert!(bytes.as_shm().is_some());
         drop((drawn, data, got));
+
+        // A buffer of the pool that held an earlier frame is lent zeroed.
+        if let Some(mut dirty) = lender.lend(640 * 480) {
+            dirty.bytes_mut().fill(0xFF); // and back to the pool
+        }
+        let px = PixelBuffer::lent(Some(&*lender), 640 * 480);
+        assert!(px.is_lent() && px.iter().all(|&b| b == 0));
+        drop(px);
 
         // A small message (a force) is not put in the pool: it crosses the socket.
         let force = MsgData::new(ratelab_core::msg::ForceMsg { newtons: 1.0 });

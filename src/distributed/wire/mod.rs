@@ -26,8 +26,8 @@ pub use launcher_to_process::{decode_relayed, encode_relayed, Setup, ToProcess, 
 pub use launcher_to_watcher::RunOver;
 pub use process_to_launcher::{ToLauncher, WireLink};
 pub use process_to_process::{
-    decode_reports, encode_reports, Payload, SampleHead, SampleView, Ticked, WireSample,
-    MAX_SAMPLE_BYTES, MAX_SENT_PER_TICK, MAX_SEQ, MAX_SEQ_JUMP, MAX_TICKS_PER_MESSAGE,
+    check_sample_len, decode_reports, encode_reports, Payload, SampleHead, SampleView, Ticked,
+    WireSample, MAX_SAMPLE_BYTES, MAX_SENT_PER_TICK, MAX_SEQ, MAX_SEQ_JUMP, MAX_TICKS_PER_MESSAGE,
     MAX_TICK_BYTES,
 };
 
@@ -263,6 +263,82 @@ mod tests {
                 assert!(!copy.data.is_within(&arrived), "a copy");
             }
         }
+    }
+
+    /// A sample in pieces (its head, then a frame in a run of its own, as a frame drawn into
+    /// a lent buffer crosses) reads as the same sample in one run, its pixels a view of their
+    /// run; a malformed one is refused in one line, and one whose pixels straddle two runs is
+    /// still read (joined).
+    #[test]
+    fn a_sample_in_pieces_reads_as_in_one_run_and_a_malformed_one_is_refused() {
+        let pixels: Vec<u8> = (0..70_000u32).map(|i| (i % 251) as u8).collect();
+        let image = MsgData::new(ratelab_core::msg::ImageMsg {
+            height: 100,
+            width: 700,
+            encoding: "mono8".into(),
+            step: 700,
+            data: pixels.clone().into(),
+        });
+        let head = SampleHead {
+            seq: 7,
+            stamp_ns: 1 << 30,
+            origin_ns: Some(5),
+            sent_mono_ns: 1,
+        };
+        let len = image.encoded_len();
+        let mut one = vec![0u8; head.sample_len(len)];
+        head.write(&image, len, &mut one).unwrap();
+        let cut = one.len() - pixels.len();
+        assert_eq!(
+            &one[..head.head_bytes(len).len()],
+            &head.head_bytes(len)[..]
+        );
+        let frame = bytes::Bytes::copy_from_slice(&one[cut..]);
+        let pieces: [&[u8]; 2] = [&one[..cut], &frame];
+        let view = SampleView::decode_pieces(&pieces).unwrap();
+        assert_eq!(view.head, head);
+        assert_eq!(view.data.to_vec(), image.to_bytes());
+        let t = AnyTopic::new("/t", image.msg_type(), 1).unwrap();
+        let mut off = None;
+        view.deliver(&t, &mut off, Some(&frame)).unwrap();
+        let got = t.read(ratelab_core::time::Nanos(1 << 41)).unwrap().data;
+        assert_eq!(got, image);
+        let img = got.get::<ratelab_core::msg::ImageMsg>().unwrap();
+        assert!(img.data.is_within(&frame), "a view of the frame's run");
+        // Pixels cut in two runs: read joined, the same message (a copy).
+        let straddling: [&[u8]; 2] = [&one[..cut + 10], &one[cut + 10..]];
+        let view = SampleView::decode_pieces(&straddling).unwrap();
+        view.deliver(&t, &mut off, Some(&frame)).unwrap();
+        let got = t.read(ratelab_core::time::Nanos(1 << 41)).unwrap().data;
+        assert_eq!(got, image);
+        // Refused, each in one line: no runs; a payload shorter or longer than its head
+        // says; a head cut in two; a seq past the bound; a type that is not the topic's.
+        assert!(SampleView::decode_pieces(&[]).is_err());
+        for bad in [
+            [&one[..cut], &one[cut..one.len() - 1]],
+            [&one[..cut], &[&one[cut..], &[0u8][..]].concat()[..]],
+            [&one[..3], &one[3..]],
+        ] {
+            let e = SampleView::decode_pieces(&bad).unwrap_err();
+            assert!(
+                e.starts_with("a malformed sample") && !e.contains('\n'),
+                "{e}"
+            );
+        }
+        let far = SampleHead {
+            seq: MAX_SEQ + 1,
+            ..head
+        };
+        let mut one_far = vec![0u8; far.sample_len(len)];
+        far.write(&image, len, &mut one_far).unwrap();
+        let at = one_far.len() - pixels.len();
+        let e = SampleView::decode_pieces(&[&one_far[..at], &one_far[at..]]).unwrap_err();
+        assert!(e.contains("numbered"), "{e}");
+        let force = AnyTopic::new("/f", ForceMsg::TYPE, 1).unwrap();
+        let view = SampleView::decode_pieces(&pieces).unwrap();
+        let e = view.deliver(&force, &mut None, Some(&frame)).unwrap_err();
+        assert!(e.contains("/f") && !e.contains('\n'), "{e}");
+        assert!(check_sample_len(MAX_SAMPLE_BYTES + 1).is_err());
     }
 
     #[test]

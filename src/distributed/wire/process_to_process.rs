@@ -8,7 +8,7 @@
 
 use super::decode_exact;
 use ratelab_core::limits;
-use ratelab_core::msg::{AnyTopic, MsgData};
+use ratelab_core::msg::{AnyTopic, MsgData, PiecesError};
 use ratelab_core::time::Nanos;
 use serde::{Deserialize, Serialize};
 
@@ -93,7 +93,10 @@ impl SampleHead {
 }
 
 /// A sample of `len` bytes may be read: at most [`MAX_SAMPLE_BYTES`].
-fn check_sample_len(len: usize) -> Result<(), String> {
+///
+/// # Errors
+/// One line naming the bound.
+pub fn check_sample_len(len: usize) -> Result<(), String> {
     if len > MAX_SAMPLE_BYTES {
         return Err(limits::refusal(
             format_args!("a sample of {len} bytes (at most {MAX_SAMPLE_BYTES})"),
@@ -181,8 +184,11 @@ impl Payload<'_> {
                 let mut pieces = Vec::with_capacity(rest.len() + 1);
                 pieces.push(*first);
                 pieces.extend_from_slice(rest);
-                ty.decode_pieces(&pieces)
-                    .or_else(|_| ty.decode(&self.to_vec()))
+                match ty.decode_pieces(&pieces) {
+                    Err(PiecesError::Straddles) => ty.decode(&self.to_vec()),
+                    Err(PiecesError::Refused(why)) => Err(why),
+                    Ok(data) => Ok(data),
+                }
             }
         }
     }

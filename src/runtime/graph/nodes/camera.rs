@@ -166,7 +166,7 @@ impl RustNode for Camera {
         let frame = match rendered {
             Some(px) => self.geometry.frame_of(px),
             None => {
-                let len = self.geometry.bytes();
+                let len = self.geometry.byte_len();
                 let mut px = match &self.out {
                     Some(topic) => topic.loan_pixels(len),
                     None => PixelBuffer::zeroed(len),

@@ -66,21 +66,23 @@ impl FrameGeometry {
     /// A frame of the cart at `cart_pos_m` with its pole at `theta_rad` (from upright,
     /// positive toward +x), `mono8`, row after row.
     pub fn draw(&self, cart_pos_m: f64, theta_rad: f64) -> Vec<u8> {
-        let mut px = vec![0u8; self.bytes()];
+        let mut px = vec![0u8; self.byte_len()];
         self.draw_into(&mut px, cart_pos_m, theta_rad);
         px
     }
 
     /// The bytes of a frame, `mono8`: width × height.
-    pub fn bytes(&self) -> usize {
+    pub fn byte_len(&self) -> usize {
         self.width as usize * self.height as usize
     }
 
-    /// [`FrameGeometry::draw`] into `px`, which must be [`FrameGeometry::bytes`] long with
-    /// every byte 0 (a buffer the frame's topic lent, [`ratelab_core::msg::AnyTopic::loan_pixels`]);
-    /// nothing is drawn into one of another length.
+    /// [`FrameGeometry::draw`] into `px`, which must be [`FrameGeometry::byte_len`] long
+    /// with every byte 0 (a buffer the frame's topic lent,
+    /// [`ratelab_core::msg::AnyTopic::loan_pixels`]); nothing is drawn into one of another
+    /// length (a caller's mistake: a debug build stops on it).
     pub fn draw_into(&self, px: &mut [u8], cart_pos_m: f64, theta_rad: f64) {
         let (w, h) = (self.width as usize, self.height as usize);
+        debug_assert_eq!(px.len(), w * h, "a frame's buffer of another length");
         if px.len() != w * h {
             return;
         }
