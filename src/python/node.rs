@@ -315,15 +315,25 @@ pub fn lend_bytes<'py>(
     Ok(pyo3::types::PyMemoryView::from(&owner)?.into_any())
 }
 
-/// A bytes field's value from Python: `bytes` copied once, or any object that lends its
-/// bytes through the buffer protocol (a `bytearray`, a `memoryview`, a contiguous NumPy
-/// array of bytes), copied once from its buffer.
-fn bytes_from_python(v: &Bound<'_, PyAny>) -> PyResult<ratelab_core::msg::ImageData> {
+/// A bytes field's value from Python, for a message published on `topic`: `bytes`, or any
+/// object that lends its bytes through the buffer protocol (a `bytearray`, a `memoryview`, a
+/// NumPy array of bytes), copied once, into a buffer `topic` lends
+/// ([`AnyTopic::loan_pixels`]: in a launch whose frames cross to another process, a buffer
+/// of the process's shared-memory pool, so the frame is not copied again on its way).
+fn bytes_from_python(
+    v: &Bound<'_, PyAny>,
+    topic: &AnyTopic,
+) -> PyResult<ratelab_core::msg::ImageData> {
     if let Ok(b) = v.cast::<PyBytes>() {
-        return Ok(ratelab_core::msg::ImageData::from(b.as_bytes()));
+        let b = b.as_bytes();
+        let mut px = topic.loan_pixels(b.len());
+        px.copy_from_slice(b);
+        return Ok(px.into());
     }
     let buffer = pyo3::buffer::PyBuffer::<u8>::get(v)?;
-    Ok(buffer.to_vec(v.py())?.into())
+    let mut px = topic.loan_pixels(buffer.len_bytes());
+    buffer.copy_to_slice(v.py(), &mut px)?;
+    Ok(px.into())
 }
 
 /// A message's values (of fields `fields`) as a Python tuple: a whole-number field an
@@ -362,7 +372,7 @@ fn from_python_values(
             Ok(match f.kind {
                 FieldKind::Number | FieldKind::Integer => Value::Number(v.extract()?),
                 FieldKind::Text => Value::Text(v.extract()?),
-                FieldKind::Bytes => Value::Bytes(bytes_from_python(&v)?),
+                FieldKind::Bytes => Value::Bytes(bytes_from_python(&v, topic)?),
             })
         })
         .collect::<PyResult<_>>()?;

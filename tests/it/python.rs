@@ -1588,6 +1588,82 @@ fn a_python_node_publishes_and_reads_an_image_s_bytes_in_one_process_and_across(
     );
 }
 
+/// A Python node's frame crosses to another process in the buffer its topic lent (issue 76
+/// item 1): the NumPy array it publishes is copied once, into the publishing process's
+/// shared-memory pool, and the reading process's pixels are a view of that buffer. The
+/// launch's wire line counts every frame so; the reader checks every pixel.
+#[test]
+fn a_python_node_s_large_frame_crosses_in_the_buffer_its_topic_lent() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    script(
+        dir.path(),
+        "painter.py",
+        "import numpy as np\n\
+         from ratelab import Image\n\
+         class Painter:\n\
+         \x20   def __init__(self, node):\n\
+         \x20       self.k = 0\n\
+         \x20       self.pub = node.create_publisher(Image, '/img', 1)\n\
+         \x20       node.create_timer(node.get_period(), self.tick)\n\
+         \x20   def tick(self):\n\
+         \x20       self.k += 1\n\
+         \x20       frame = np.full((300, 300), self.k % 251, dtype=np.uint8)\n\
+         \x20       self.pub.publish(Image(height=300, width=300, encoding='mono8', step=300, data=frame))\n",
+    );
+    script(
+        dir.path(),
+        "reader.py",
+        "import numpy as np\n\
+         from ratelab import Force, Image\n\
+         class Reader:\n\
+         \x20   def __init__(self, node):\n\
+         \x20       self.pub = node.create_publisher(Force, '/action', 1)\n\
+         \x20       node.create_subscription(Image, '/img', self.on_img, 1)\n\
+         \x20   def on_img(self, img):\n\
+         \x20       px = np.frombuffer(img.data, np.uint8)\n\
+         \x20       assert px.size == 90000 and (px == px[0]).all() and px[0] > 0, px[:4]\n\
+         \x20       self.pub.publish(Force(newtons=0.0))\n",
+    );
+    let g = dir.path().join("frames.toml");
+    std::fs::write(
+        &g,
+        "name = \"py-frames\"\n\
+         [[node]]\nname = \"painter\"\nkind = \"python\"\nscript = \"painter.py\"\n\
+         class = \"Painter\"\nrate_hz = 10\npublishes = \"/img\"\nprocess = \"paint\"\n\
+         [[node]]\nname = \"reader\"\nkind = \"python\"\nscript = \"reader.py\"\n\
+         class = \"Reader\"\nrate_hz = 10\nsubscribes = \"/img\"\npublishes = \"/action\"\n\
+         [[node]]\nname = \"actuator\"\nkind = \"actuator\"\nrate_hz = 50\nsubscribes = \"/action\"\n\
+         [[topic]]\nname = \"/img\"\ntype = \"image\"\ndepth = 1\n\
+         [[topic]]\nname = \"/action\"\ntype = \"force\"\ndepth = 1\n",
+    )
+    .unwrap();
+    let o = ratelab(&[
+        "launch",
+        g.to_str().unwrap(),
+        "--processes",
+        "--clock",
+        "virtual",
+        "--duration",
+        "1",
+    ]);
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(o.status.success(), "{out}{}", stderr(&o));
+    let line = out
+        .lines()
+        .find(|l| l.contains("wire /img into 'reader'"))
+        .unwrap_or_else(|| panic!("no wire line for /img: {out}"));
+    let samples: u64 = line
+        .split(": ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{line}"));
+    assert!(samples >= 5, "{line}");
+    assert_eq!(crate::read_in_place(line), samples, "{line}");
+    assert_eq!(crate::drawn_in_place(line), samples, "{line}");
+}
+
 /// Under the real clock each node runs on its own thread, and `print` writes a line in
 /// pieces: one node's line stays whole while another prints between its pieces (each
 /// thread has its own partial line).
