@@ -558,19 +558,17 @@ pub const SHM_THRESHOLD_BYTES: usize = 64 * 1024;
 /// since Zenoh's receive batches are shorter than 64 KiB and a sample fragmented across
 /// them arrives in runs of theirs). For a payload that arrived, not one made locally.
 pub(crate) fn shared_run(payload: &zenoh::bytes::ZBytes) -> Option<usize> {
-    shared_runs(payload).next()
+    runs(payload).position(|(_, shared)| shared)
 }
 
-/// Every run of a payload that arrived through Zenoh that is a buffer in shared memory, as
-/// [`shared_run`] tells them (a message with two lent frames has two).
-pub(crate) fn shared_runs(payload: &zenoh::bytes::ZBytes) -> impl Iterator<Item = usize> + '_ {
+/// Each run of a payload that arrived through Zenoh, and whether it is a buffer in shared
+/// memory, as [`shared_run`] tells them (a message with two lent frames has two).
+pub(crate) fn runs(payload: &zenoh::bytes::ZBytes) -> impl Iterator<Item = (&[u8], bool)> + '_ {
     let one = payload.as_shm().is_some();
     let several = payload.slices().nth(1).is_some();
     payload
         .slices()
-        .enumerate()
-        .filter(move |(i, run)| (one && *i == 0) || (several && run.len() >= SHM_THRESHOLD_BYTES))
-        .map(|(i, _)| i)
+        .map(move |run| (run, one || (several && run.len() >= SHM_THRESHOLD_BYTES)))
 }
 
 // What [`shared_run`] rests on: Zenoh's receive batches are at most `u16::MAX` bytes (its

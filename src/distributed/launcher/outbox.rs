@@ -92,11 +92,18 @@ pub const SHM_REFERENCE_BYTES: usize = 64;
 const _: () = assert!(SHM_REFERENCE_BYTES <= MAX_DIRECT_BYTES);
 
 /// What `payload` takes on the wire, bytes: [`SHM_REFERENCE_BYTES`] for each of its buffers
-/// in shared memory ([`crate::shared_runs`]: their bytes stay in the publisher's pool), and
-/// the length of the rest (a frame drawn into a lent buffer crosses beside its head).
+/// in shared memory ([`crate::runs`]: their bytes stay in the publisher's pool), and the
+/// length of the rest (a frame drawn into a lent buffer crosses beside its head).
 fn wire_bytes(payload: &ZBytes) -> usize {
-    let runs: Vec<usize> = payload.slices().map(<[u8]>::len).collect();
-    crate::shared_runs(payload).fold(payload.len(), |n, i| n - runs[i] + SHM_REFERENCE_BYTES)
+    crate::runs(payload)
+        .map(|(run, shared)| {
+            if shared {
+                SHM_REFERENCE_BYTES
+            } else {
+                run.len()
+            }
+        })
+        .sum()
 }
 
 /// What `payload` is charged against [`MAX_QUEUED_BYTES`] (in shared memory or not: a
