@@ -281,15 +281,15 @@ pub(super) fn read_arrived<R>(
     }
     let shared =
         crate::shared_run(payload).map(|i| bytes::Bytes::from_owner(NthSlice(payload.clone(), i)));
-    let pieces: Vec<&[u8]> = payload.slices().collect();
-    match &pieces[..] {
-        [] => read(SampleView::decode(&[]), None),
-        [one] => read(
-            SampleView::decode(shared.as_deref().unwrap_or(one)),
-            shared.as_ref(),
-        ),
-        _ => read(SampleView::decode_pieces(&pieces), shared.as_ref()),
+    let mut runs = payload.slices();
+    let first = runs.next().unwrap_or_default();
+    if runs.next().is_none() {
+        // One run (every small sample): read where it is, no list of runs made.
+        let bytes = shared.as_deref().unwrap_or(first);
+        return read(SampleView::decode(bytes), shared.as_ref());
     }
+    let pieces: Vec<&[u8]> = payload.slices().collect();
+    read(SampleView::decode_pieces(&pieces), shared.as_ref())
 }
 
 /// One run of a payload's bytes, as [`bytes::Bytes::from_owner`] takes it: the payload is
