@@ -433,17 +433,9 @@ fn a_megabyte_frame_crosses_processes_whole_with_its_counters_right() {
         // (when the pool was made at the first frame, a loaded machine's full test suite
         // once sent all 91 frames of this short lockstep run through the socket); without
         // shared memory, none is read in place.
-        let line = out
-            .lines()
-            .find(|l| l.contains("wire /image into 'vision'"))
-            .unwrap_or_else(|| panic!("no wire line for /image: {out}"));
+        let line = crate::wire_line(&out, "/image", "vision");
         let in_place = crate::read_in_place(line);
-        let samples: u64 = line
-            .split(": ")
-            .nth(1)
-            .and_then(|r| r.split(' ').next())
-            .and_then(|n| n.parse().ok())
-            .unwrap_or_else(|| panic!("{line}"));
+        let samples = crate::wire_samples(line);
         // And the camera drew every frame straight into a buffer of that pool, which its
         // topic lent it: the frame crossed without a copy between the drawing and the
         // vision node's pixels.

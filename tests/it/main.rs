@@ -72,6 +72,26 @@ pub fn read_in_place(wire_line: &str) -> u64 {
     wire_line_count(wire_line, " read in place from shared memory")
 }
 
+/// A launch's summary line for `topic`'s time on the wire into `process` (`wire /image
+/// into 'vision': 91 samples, …`), out of its printed `summary`; the test fails without one.
+pub fn wire_line<'s>(summary: &'s str, topic: &str, process: &str) -> &'s str {
+    let head = format!("wire {topic} into '{process}'");
+    summary
+        .lines()
+        .find(|l| l.contains(&head))
+        .unwrap_or_else(|| panic!("no wire line for {topic} into {process}: {summary}"))
+}
+
+/// How many samples a launch's wire line says arrived.
+pub fn wire_samples(wire_line: &str) -> u64 {
+    wire_line
+        .split(": ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no sample count in: {wire_line}"))
+}
+
 /// Of those, how many crossed in the buffer their publishing node drew them into (a lent
 /// buffer, issue 76), as a launch's wire line says it; 0 when it says none.
 pub fn drawn_in_place(wire_line: &str) -> u64 {

@@ -1649,16 +1649,8 @@ fn a_python_node_s_large_frame_crosses_in_the_buffer_its_topic_lent() {
     ]);
     let out = String::from_utf8_lossy(&o.stdout).into_owned();
     assert!(o.status.success(), "{out}{}", stderr(&o));
-    let line = out
-        .lines()
-        .find(|l| l.contains("wire /img into 'reader'"))
-        .unwrap_or_else(|| panic!("no wire line for /img: {out}"));
-    let samples: u64 = line
-        .split(": ")
-        .nth(1)
-        .and_then(|r| r.split(' ').next())
-        .and_then(|n| n.parse().ok())
-        .unwrap_or_else(|| panic!("{line}"));
+    let line = crate::wire_line(&out, "/img", "reader");
+    let samples = crate::wire_samples(line);
     assert!(samples >= 5, "{line}");
     assert_eq!(crate::read_in_place(line), samples, "{line}");
     assert_eq!(crate::drawn_in_place(line), samples, "{line}");

@@ -234,7 +234,7 @@ impl MsgTypeInfo {
             type_id: TypeId::of::<M>,
             new_topic: new_topic::<M>,
             from_bytes: from_bytes::<M>,
-            from_pieces: from_pieces::<M>,
+            from_pieces: pieces::from_pieces::<M>,
             from_fields: from_fields::<M>,
             from_values: from_values::<M>,
             ros2: M::ros2,
@@ -286,35 +286,6 @@ fn from_bytes<M: Message>(bytes: &[u8]) -> Result<MsgData, String> {
         Ok((m, [])) => Ok(MsgData::new(m)),
         Ok((_, rest)) => Err(format!("{} bytes after a {} payload", rest.len(), M::NAME)),
         Err(e) => Err(format!("not a {} payload: {e}", M::NAME)),
-    }
-}
-
-fn from_pieces<M: Message>(pieces: &[&[u8]]) -> Result<MsgData, PiecesError> {
-    let len: usize = pieces.iter().map(|p| p.len()).sum();
-    if len > MAX_PAYLOAD_BYTES {
-        return Err(PiecesError::Refused(format!(
-            "a {} payload of {len} bytes (at most {MAX_PAYLOAD_BYTES})",
-            M::NAME
-        )));
-    }
-    let mut de = postcard::Deserializer::from_flavor(pieces::FromPieces::new(pieces));
-    let decoded = M::deserialize(&mut de);
-    // The flavor's finalize cannot fail.
-    let left = de
-        .finalize()
-        .map_err(|e| PiecesError::Refused(e.to_string()))?;
-    match decoded {
-        Err(_) if left.straddled => Err(PiecesError::Straddles),
-        Err(e) => Err(PiecesError::Refused(format!(
-            "not a {} payload: {e}",
-            M::NAME
-        ))),
-        Ok(m) if left.bytes == 0 => Ok(MsgData::new(m)),
-        Ok(_) => Err(PiecesError::Refused(format!(
-            "{} bytes after a {} payload",
-            left.bytes,
-            M::NAME
-        ))),
     }
 }
 

@@ -6,6 +6,7 @@
 //! that crossed in pieces arrives. The bytes are postcard's, the same as
 //! [`MsgData::to_bytes`](super::MsgData::to_bytes) in one run.
 
+use super::{Message, MsgData, MAX_PAYLOAD_BYTES};
 use postcard::de_flavors::Flavor as DeFlavor;
 use postcard::ser_flavors::Flavor as SerFlavor;
 
@@ -136,6 +137,37 @@ impl<'de> DeFlavor<'de> for FromPieces<'de> {
             bytes: self.left(),
             straddled: self.straddled,
         })
+    }
+}
+
+/// A message of type `M` from its wire bytes in `pieces`
+/// ([`MsgType::decode_pieces`](super::MsgType::decode_pieces)).
+pub(super) fn from_pieces<M: Message>(pieces: &[&[u8]]) -> Result<MsgData, PiecesError> {
+    let len: usize = pieces.iter().map(|p| p.len()).sum();
+    if len > MAX_PAYLOAD_BYTES {
+        return Err(PiecesError::Refused(format!(
+            "a {} payload of {len} bytes (at most {MAX_PAYLOAD_BYTES})",
+            M::NAME
+        )));
+    }
+    let mut de = postcard::Deserializer::from_flavor(FromPieces::new(pieces));
+    let decoded = M::deserialize(&mut de);
+    // The flavor's finalize cannot fail.
+    let left = de
+        .finalize()
+        .map_err(|e| PiecesError::Refused(e.to_string()))?;
+    match decoded {
+        Err(_) if left.straddled => Err(PiecesError::Straddles),
+        Err(e) => Err(PiecesError::Refused(format!(
+            "not a {} payload: {e}",
+            M::NAME
+        ))),
+        Ok(m) if left.bytes == 0 => Ok(MsgData::new(m)),
+        Ok(_) => Err(PiecesError::Refused(format!(
+            "{} bytes after a {} payload",
+            left.bytes,
+            M::NAME
+        ))),
     }
 }
 
