@@ -1481,6 +1481,28 @@ fn a_python_node_that_never_declares_a_topic_its_file_gives_it_is_warned_about()
     }
 }
 
+/// A graph of a Python `Painter` (script `painter`, in `dir`) publishing `/img` from a
+/// process of its own (`paint`), a Python `Reader` (`reader.py`) that answers each frame
+/// on `/action`, and the actuator; written to `dir/bytes.toml`, whose path it returns.
+fn painter_reader_graph(dir: &Path, painter: &str) -> PathBuf {
+    let g = dir.join("bytes.toml");
+    std::fs::write(
+        &g,
+        format!(
+            "name = \"py-bytes\"\n\
+             [[node]]\nname = \"painter\"\nkind = \"python\"\nscript = \"{painter}\"\n\
+             class = \"Painter\"\nrate_hz = 10\npublishes = \"/img\"\nprocess = \"paint\"\n\
+             [[node]]\nname = \"reader\"\nkind = \"python\"\nscript = \"reader.py\"\n\
+             class = \"Reader\"\nrate_hz = 10\nsubscribes = \"/img\"\npublishes = \"/action\"\n\
+             [[node]]\nname = \"actuator\"\nkind = \"actuator\"\nrate_hz = 50\nsubscribes = \"/action\"\n\
+             [[topic]]\nname = \"/img\"\ntype = \"image\"\ndepth = 1\n\
+             [[topic]]\nname = \"/action\"\ntype = \"force\"\ndepth = 1\n"
+        ),
+    )
+    .unwrap();
+    g
+}
+
 /// Bytes cross into and out of Python nodes (issue 51 item 2): a Python node publishes a
 /// NumPy array as an `Image`'s pixels, another reads them back (a read-only view) with `np.frombuffer`, in one
 /// process and across processes (a node that finds a pixel wrong raises, and the run exits
@@ -1528,20 +1550,7 @@ fn a_python_node_publishes_and_reads_an_image_s_bytes_in_one_process_and_across(
             .unwrap()
             .replace("PIXELS", pixels);
         std::fs::write(dir.path().join("painter_now.py"), painter).unwrap();
-        let g = dir.path().join("bytes.toml");
-        std::fs::write(
-            &g,
-            "name = \"py-bytes\"\n\
-             [[node]]\nname = \"painter\"\nkind = \"python\"\nscript = \"painter_now.py\"\n\
-             class = \"Painter\"\nrate_hz = 10\npublishes = \"/img\"\nprocess = \"paint\"\n\
-             [[node]]\nname = \"reader\"\nkind = \"python\"\nscript = \"reader.py\"\n\
-             class = \"Reader\"\nrate_hz = 10\nsubscribes = \"/img\"\npublishes = \"/action\"\n\
-             [[node]]\nname = \"actuator\"\nkind = \"actuator\"\nrate_hz = 50\nsubscribes = \"/action\"\n\
-             [[topic]]\nname = \"/img\"\ntype = \"image\"\ndepth = 1\n\
-             [[topic]]\nname = \"/action\"\ntype = \"force\"\ndepth = 1\n",
-        )
-        .unwrap();
-        g
+        painter_reader_graph(dir.path(), "painter_now.py")
     };
     let g = graph("frame");
     let g = g.to_str().unwrap();
@@ -1625,19 +1634,7 @@ fn a_python_node_s_large_frame_crosses_in_the_buffer_its_topic_lent() {
          \x20       assert px.size == 90000 and (px == px[0]).all() and px[0] > 0, px[:4]\n\
          \x20       self.pub.publish(Force(newtons=0.0))\n",
     );
-    let g = dir.path().join("frames.toml");
-    std::fs::write(
-        &g,
-        "name = \"py-frames\"\n\
-         [[node]]\nname = \"painter\"\nkind = \"python\"\nscript = \"painter.py\"\n\
-         class = \"Painter\"\nrate_hz = 10\npublishes = \"/img\"\nprocess = \"paint\"\n\
-         [[node]]\nname = \"reader\"\nkind = \"python\"\nscript = \"reader.py\"\n\
-         class = \"Reader\"\nrate_hz = 10\nsubscribes = \"/img\"\npublishes = \"/action\"\n\
-         [[node]]\nname = \"actuator\"\nkind = \"actuator\"\nrate_hz = 50\nsubscribes = \"/action\"\n\
-         [[topic]]\nname = \"/img\"\ntype = \"image\"\ndepth = 1\n\
-         [[topic]]\nname = \"/action\"\ntype = \"force\"\ndepth = 1\n",
-    )
-    .unwrap();
+    let g = painter_reader_graph(dir.path(), "painter.py");
     let o = ratelab(&[
         "launch",
         g.to_str().unwrap(),

@@ -166,19 +166,16 @@ impl SharedPool {
         }
         let mut out = ZBytes::writer();
         out.write_all(&head.head_bytes(payload_len)).ok()?;
-        let (mut frames, mut n) = (0, 0);
+        let mut n = 0;
         data.encode_pieces(&mut |piece| {
             n += piece.len();
             match self.lent_frame(piece) {
-                Some(frame) => {
-                    out.append(frame.into());
-                    frames += 1;
-                }
+                Some(frame) => out.append(frame.into()),
                 None => out.write_all(piece).unwrap_or_default(),
             }
         })
         .ok()?;
-        (frames > 0 && n == payload_len).then(|| out.finish())
+        (n == payload_len).then(|| out.finish())
     }
 
     /// Whether a frame lent from the pool is still held (by a message being published, a
