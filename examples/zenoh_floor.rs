@@ -264,7 +264,7 @@ fn star_session(endpoint: &str, creds: &str, who: &str) -> zenoh::Session {
     };
     let at = [endpoint.to_string()];
     match role {
-        Role::HostRouter => open_router(&at, access),
+        Role::HostRouter => open_router(&at, access, false),
         _ => open_client(&at, access),
     }
     .expect("a session")

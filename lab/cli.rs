@@ -213,6 +213,11 @@ pub struct LaunchArgs {
     /// process: killing it ends the run).
     #[arg(long = "kill-process", value_name = "PROCESS@T", value_parser = parse_kill_process)]
     pub kill_processes: Vec<Fault>,
+    /// Link every process to the launcher's router alone (a star), even in a launch of 10
+    /// processes or fewer started here, whose processes otherwise also link to each other
+    /// directly (a sample or a lockstep report then crosses one link, not two).
+    #[arg(long)]
+    pub star: bool,
     /// The run flags.
     #[command(flatten)]
     pub run: RunArgs,
@@ -251,7 +256,10 @@ pub struct ProcessArgs {
     /// The launcher's endpoint (repeatable).
     #[arg(long, value_name = "tls/HOST:PORT", required = true)]
     pub connect: Vec<String>,
-    /// Endpoints to listen on for other processes (default tls/127.0.0.1:<any port>).
+    /// Listen here for the launch's other processes, which then link to this one directly
+    /// (a launch linked directly: its launcher gives the processes it starts
+    /// tls/127.0.0.1:0, any free port). Without it, this process links to the router at
+    /// --connect alone.
     #[arg(long, value_name = "tls/HOST:PORT")]
     pub listen: Vec<String>,
     /// The launch's credentials, holding this process's identity (`launch

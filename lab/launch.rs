@@ -32,9 +32,10 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
             || a.no_spawn
             || a.export_credentials.is_some()
             || !a.kill_processes.is_empty()
+            || a.star
         {
             anyhow::bail!(
-                "--listen, --no-spawn, --export-credentials and --kill-process need --processes"
+                "--listen, --no-spawn, --export-credentials, --kill-process and --star need --processes"
             );
         }
         return headless::run_headless(&run, stop).map(|_| ());
@@ -107,6 +108,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         credentials,
         ros2_domain,
         kill_processes,
+        star: a.star,
     };
     let placed = cfg.graph.placement().len();
     println!(

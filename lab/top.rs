@@ -7,7 +7,7 @@ use ratelab::distributed::credentials::Role;
 use ratelab::distributed::monitor::{ask_graph, placed_processes, Carried, PlacedProcess};
 use ratelab::distributed::process::LiveStats;
 use ratelab::distributed::zenoh::{self, Wait};
-use ratelab::distributed::{check_endpoint, live_tokens, open_session, Access};
+use ratelab::distributed::{check_endpoint, live_tokens, open_client, Access};
 use ratelab::scheduler::StopFlag;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -31,12 +31,11 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
         role: &Role::Observer,
         spec: None,
     };
-    let session = open_session(
-        &[ratelab::distributed::LOOPBACK_ANY.to_string()],
-        &connect,
-        access,
-    )
-    .map_err(|e| anyhow::anyhow!("cannot reach {}: {e}: {hint}", connect.join(", ")))?;
+    // A client of the launcher's router, as a watcher is: it hears every process through
+    // the router, whether the processes are its clients (a star) or peers linked to each
+    // other (a peer would be taken for one of those, and hear none of them).
+    let session = open_client(&connect, access)
+        .map_err(|e| anyhow::anyhow!("cannot reach {}: {e}: {hint}", connect.join(", ")))?;
     let (tx, rx) = crossbeam_channel::bounded::<LiveStats>(1024);
     let _sub = session
         .declare_subscriber("ratelab/*/@stats/*")

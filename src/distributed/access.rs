@@ -11,7 +11,7 @@
 //! |---|---|---|
 //! | everyone | nothing | subscribers, queries, liveliness subscribers and queries on the graph's topics, tokens (`@node`, `@pub`, `@sub`, `@launcher`), figures (`@stats`), settings (`@setup`), log and end |
 //! | the launcher | control (`@ctl/*`), the end (`@ended`), progress lines (`@log`) | its token `@launcher`, the settings' queryable `@setup` (and its replies); subscribers to the launch's own traffic: reports (`@up`), ticks (`@ticked`), the samples it passes on (`@via`), control and relayed reports |
-//! | process `P` | the topics its nodes publish, on `@via/<topic>` for the launcher to pass on (a topic's own key is the router's), its reports `@up/P`, ticks `@ticked/P`, counters `@stats/P` | its nodes' tokens `@node/P/*`, their endpoints' `@pub`/`@sub` tokens; subscribers to its own control `@ctl/P` and relayed reports `@relayed/P` |
+//! | process `P` | the topics its nodes publish, on `@via/<topic>` for the launcher to pass on (in a launch linked directly, on the topic's own key), its reports `@up/P`, ticks `@ticked/P`, counters `@stats/P` | its nodes' tokens `@node/P/*`, their endpoints' `@pub`/`@sub` tokens; subscribers to its own control `@ctl/P` and relayed reports `@relayed/P` (linked directly, also to the other processes' ticks `@ticked/*`) |
 //! | an observer | nothing | nothing more |
 //! | the launcher's router | anything on the graph's keys | anything on the graph's keys |
 //! | a host's router, heard by the launcher's router | the processes' kinds of keys (`@up`, `@ticked`, `@via`, `@stats`) | node and endpoint tokens; reads of any key |
@@ -35,7 +35,14 @@
 //! still cannot publish another's topic, report or token, nor control anybody: the router
 //! drops it before any other process sees it. Nobody but the launcher holds the router's
 //! identity ([`super::credentials::Role::Router`]). Two sessions linked directly (a test,
-//! the transport-floor examples) check each other by the same rules.
+//! the transport-floor examples) check each other by the same rules, and so do the
+//! processes of a launch linked directly ([`super::open_linked_peer`]; `direct` below):
+//! each process checks what every other sends it over their link, so a process still
+//! cannot publish another's topic or report to it. There, and only there, a process may
+//! put its own topics on their own keys (which every process and the router, for its
+//! watchers, then accept from it) and hear the other processes' reports: in a star the
+//! topic's key stays the router's, so that what it passes on to a process goes through
+//! that process's outbox, never straight from Zenoh's one thread.
 //!
 //! Across hosts, a router on each other host ([`super::host_router`]) is the one link its
 //! host's processes have: it checks each of them on arrival by these same rules, and
@@ -107,8 +114,15 @@ const ALL_MESSAGES: [&str; 9] = [
 /// `keys`, placed in `processes`; `spec` gives which process publishes which topic and
 /// owns which node (`None`: a watcher that does not know yet, see the module's header).
 /// `hearer` is the session's own identity: the launcher's router ([`Role::Router`]) hears a
-/// host's router as the processes behind it, every other session as its router.
-pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>, hearer: &Role) -> Value {
+/// host's router as the processes behind it, every other session as its router. `direct`:
+/// the launch's processes are linked directly ([`super::open_linked_peer`]), and each may
+/// also put its topics on their own keys and hear the others' reports.
+pub fn acl(
+    keys: &Keys,
+    processes: &[String],
+    (spec, direct): (Option<&GraphSpec>, bool),
+    hearer: &Role,
+) -> Value {
     let p = keys.prefix();
     let at = |k: &str| format!("{p}/{k}");
     let mut rules = Vec::new();
@@ -210,17 +224,17 @@ pub fn acl(keys: &Keys, processes: &[String], spec: Option<&GraphSpec>, hearer: 
         own(&Role::HostRouter, hosted);
     }
     for proc_name in processes {
-        let (puts, tokens) = process_keys(keys, spec, proc_name);
+        let (puts, tokens) = process_keys(keys, (spec, direct), proc_name);
         let role = Role::Process(proc_name.clone());
         let id = subject_id(&role);
+        let mut reads = vec![keys.control(proc_name), keys.relayed(proc_name)];
+        if direct {
+            reads.push(keys.ticked("*"));
+        }
         let mine = vec![
             rule(format!("{id}-put"), &["put"], puts),
             rule(format!("{id}-token"), &["liveliness_token"], tokens),
-            rule(
-                format!("{id}-read"),
-                &READS,
-                vec![keys.control(proc_name), keys.relayed(proc_name)],
-            ),
+            rule(format!("{id}-read"), &READS, reads),
         ];
         own(&role, mine);
     }
@@ -254,11 +268,12 @@ fn hosted_keys(keys: &Keys, all_keys: &[String]) -> (Vec<String>, Vec<String>, V
 }
 
 /// Process `proc_name`'s own keys ([`acl`]): (puts, liveliness tokens). With the graph's
-/// shape, its reports, ticks, figures and its topics on `@via`, its nodes' tokens; without
-/// (a watcher that does not know yet), any topic and endpoint token.
+/// shape, its reports, ticks, figures and its topics on `@via` (and, `direct`, on their
+/// own keys), its nodes' tokens; without (a watcher that does not know yet), any topic and
+/// endpoint token.
 fn process_keys(
     keys: &Keys,
-    spec: Option<&GraphSpec>,
+    (spec, direct): (Option<&GraphSpec>, bool),
     proc_name: &str,
 ) -> (Vec<String>, Vec<String>) {
     let p = keys.prefix();
@@ -270,11 +285,14 @@ fn process_keys(
     let mut tokens = vec![format!("{p}/@node/{proc_name}/**")];
     match spec {
         Some(spec) => {
-            // On `@via` only: the router alone puts on a topic's key (through its outbox,
-            // `launcher/outbox.rs`).
+            // On `@via`, for the router to pass on through its outbox
+            // (`launcher/outbox.rs`); linked directly, on the topic's own key.
             for t in &spec.topics {
                 if spec.process_of(t.publisher) == *proc_name {
                     puts.push(keys.via(&t.name));
+                    if direct {
+                        puts.push(keys.topic(&t.name));
+                    }
                 }
             }
             for (i, n) in spec.nodes.iter().enumerate() {
@@ -354,17 +372,31 @@ mod tests {
         let spec = chapter();
         let keys = Keys::new(&spec.name);
         let procs: Vec<String> = spec.placement().into_iter().map(|(p, _)| p).collect();
-        let acl = acl(&keys, &procs, Some(&spec), &Role::Router);
+        let acl = acl(&keys, &procs, (Some(&spec), false), &Role::Router);
         let p = keys.prefix();
         let robot = allowed(&acl, &Role::Process("robot".into()), "put");
         assert!(robot.contains(&format!("{p}/@via/obs")), "{robot:?}");
-        // A topic's own key is the router's (passed on from `@via`).
+        // In a star a topic's own key is the router's (passed on from `@via`).
         assert!(!robot.contains(&format!("{p}/obs")), "{robot:?}");
         assert!(!robot.contains(&format!("{p}/action")), "{robot:?}");
         assert!(!robot.contains(&format!("{p}/@via/action")), "{robot:?}");
         let policy = allowed(&acl, &Role::Process("policy".into()), "put");
         assert!(policy.contains(&format!("{p}/@via/action")), "{policy:?}");
         assert!(!policy.contains(&format!("{p}/action")), "{policy:?}");
+        assert!(
+            !policy.iter().any(|k| k.contains("@ticked/robot")),
+            "{policy:?}"
+        );
+        // Linked directly, a process also puts its own topics on their own keys, and
+        // still never another's.
+        let direct = super::acl(&keys, &procs, (Some(&spec), true), &Role::Router);
+        let robot = allowed(&direct, &Role::Process("robot".into()), "put");
+        for k in ["obs", "@via/obs"] {
+            assert!(robot.contains(&format!("{p}/{k}")), "{k}: {robot:?}");
+        }
+        for k in ["action", "@via/action"] {
+            assert!(!robot.contains(&format!("{p}/{k}")), "{k}: {robot:?}");
+        }
         assert!(!policy.iter().any(|k| k.ends_with("obs")), "{policy:?}");
         assert!(!policy.iter().any(|k| k.contains("@ctl")), "{policy:?}");
         assert_eq!(
@@ -402,7 +434,12 @@ mod tests {
             assert!(!hosted.contains(&key), "{key}: {hosted:?}");
         }
         // Its own clients hear it as their router.
-        let client = super::acl(&keys, &procs, Some(&spec), &Role::Process("robot".into()));
+        let client = super::acl(
+            &keys,
+            &procs,
+            (Some(&spec), false),
+            &Role::Process("robot".into()),
+        );
         let from_it = allowed(&client, &Role::HostRouter, "put");
         assert!(from_it.contains(&format!("{p}/**")), "{from_it:?}");
         for role in [
@@ -433,8 +470,8 @@ mod tests {
         let keys = Keys::new(&spec.name);
         let procs: Vec<String> = spec.placement().into_iter().map(|(p, _)| p).collect();
         let p = keys.prefix();
-        for shape in [Some(&spec), None] {
-            let acl = acl(&keys, &procs, shape, &Role::Router);
+        for (shape, direct) in [(Some(&spec), false), (None, false), (Some(&spec), true)] {
+            let acl = acl(&keys, &procs, (shape, direct), &Role::Router);
             let subs = |role: &Role| allowed(&acl, role, "declare_subscriber");
             let launcher = subs(&Role::Launcher);
             for k in ["@via/**", "@up/**", "@ticked/**", "@ctl/**", "@relayed/**"] {
@@ -455,11 +492,13 @@ mod tests {
                 .iter()
                 .filter(|k| traffic.iter().any(|t| k.contains(t)))
                 .collect();
-            assert_eq!(
-                own,
-                [&keys.control("policy"), &keys.relayed("policy")],
-                "{policy:?}"
-            );
+            // Its own control and relayed reports, and, linked directly, the others'
+            // reports (it hears them itself); never `@via` or `@up`.
+            let mut expected = vec![keys.control("policy"), keys.relayed("policy")];
+            if direct {
+                expected.push(keys.ticked("*"));
+            }
+            assert_eq!(own, expected.iter().collect::<Vec<_>>(), "{policy:?}");
         }
     }
 
@@ -468,11 +507,11 @@ mod tests {
         let spec = chapter();
         let keys = Keys::new(&spec.name);
         let procs: Vec<String> = spec.placement().into_iter().map(|(p, _)| p).collect();
-        for shape in [Some(&spec), None] {
+        for (shape, direct) in [(Some(&spec), false), (None, false), (Some(&spec), true)] {
             let mut c = zenoh::Config::default();
             c.insert_json5(
                 "access_control",
-                &acl(&keys, &procs, shape, &Role::Router).to_string(),
+                &acl(&keys, &procs, (shape, direct), &Role::Router).to_string(),
             )
             .unwrap();
         }

@@ -117,7 +117,7 @@ pub fn serve(opts: &HostRouterOptions, stop: &StopFlag) -> Result<Served, DistEr
         role: &Role::HostRouter,
         spec: Some(&spec),
     };
-    let session = open_as(Mode::Router, &opts.listen, &opts.connect, access)?;
+    let session = open_as((Mode::Router, false), &opts.listen, &opts.connect, access)?;
     let keys = Keys::new(&spec.name);
     let (present, gone) = (StopFlag::new(), StopFlag::new());
     let _launcher_watch = {
@@ -201,7 +201,8 @@ fn same_rules(
     let theirs = GraphSpec::parse(&setup.graph_toml, "the launcher's graph")
         .map_err(|e| DistError::Usage(e.to_string()))?;
     let processes = &opts.credentials.processes;
-    let rules = |g: &GraphSpec| super::access::acl(keys, processes, Some(g), &Role::HostRouter);
+    let rules =
+        |g: &GraphSpec| super::access::acl(keys, processes, (Some(g), false), &Role::HostRouter);
     if rules(spec) != rules(&theirs) {
         return Err(DistError::Usage(format!(
             "{}: its nodes' processes or its topics' publishers differ from the launcher's graph '{}': give the router the launcher's graph file",

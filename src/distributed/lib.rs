@@ -3,11 +3,13 @@
 //! The graph file places each node in a process (`process = "robot"`; by default the plant's
 //! nodes share `robot`, every other node runs alone: [`GraphSpec::process_of`]). Under
 //! `ratelab launch --processes` the launcher ([`launcher`]) starts one OS process per
-//! process (`ratelab process`, [`process`]) and they talk over Zenoh in a star: the
-//! launcher's session is a Zenoh router listening on `tls/127.0.0.1:PORT` ([`open_router`]),
-//! and every process, and every watcher, is a client of it ([`open_client`]): one link each,
-//! P links for P processes (where a mesh of peers took P (P − 1) / 2), and processes never
-//! link to each other.
+//! process (`ratelab process`, [`process`]) and they talk over Zenoh: the launcher's
+//! session is a Zenoh router listening on `tls/127.0.0.1:PORT` ([`open_router`]). In a
+//! large launch (or `--star`) every process, and every watcher, is a client of it
+//! ([`open_client`]): a star, one link each, P links for P processes, and processes never
+//! link to each other. In a small launch the launcher starts, the processes are peers that
+//! also link to each other ([`open_linked_peer`], [`DIRECT_LINKS_MAX`]), so that a sample or
+//! a lockstep report crosses one link, not two.
 //!
 //! - **Only the graph's own processes.** Every link is TLS 1.3 with mutual
 //!   authentication by a certificate authority made for one launch ([`credentials`]), and
@@ -35,8 +37,8 @@
 //!   ([`lockstep`]); the launcher is the time authority through the horizon it sets. The
 //!   same seed gives byte-identical metrics in one process and in several.
 //! - **Watching.** [`monitor`] is one more client of the launcher's router that sees a
-//!   running launch's tokens and reports (the attached lab; `ratelab top` is a peer linked
-//!   to it alone, [`open_session`]); [`refusals`] passes the TLS handshakes Zenoh refused
+//!   running launch's tokens and reports (the attached lab; `ratelab top` is another,
+//!   [`open_client`]); [`refusals`] passes the TLS handshakes Zenoh refused
 //!   on to the launcher's log; [`wire`] is what travels (samples, reports, the lockstep's
 //!   messages) and how it is encoded.
 //! - **ROS 2.** `launch --ros2` offers each process's nodes through [`ros2_offer`], which
@@ -70,8 +72,8 @@ use zenoh::Wait;
 /// free port instead (and says which).
 pub const DEFAULT_ENDPOINT: &str = "tls/127.0.0.1:7449";
 
-/// Where a peer session that only connects listens (`ratelab top`'s, [`open_session`]): any
-/// free port on loopback.
+/// Any free port on loopback: where each process of a launch linked directly listens for the
+/// others ([`open_linked_peer`]; the launcher gives it `--listen` this).
 pub const LOOPBACK_ANY: &str = "tls/127.0.0.1:0";
 
 /// How long a process waits for a peer's answer (a join, a ready, a granted tick).
@@ -621,14 +623,18 @@ pub struct Access<'a> {
     pub spec: Option<&'a GraphSpec>,
 }
 
-/// What a session is in a launch's star ([`open_router`], [`open_client`],
+/// What a session is in a launch ([`open_router`], [`open_client`], [`open_linked_peer`],
 /// [`open_session`]): its Zenoh mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Mode {
     /// The launcher's: a router every other session links to.
     Router,
-    /// A process's or a watcher's: a client, linked to the launcher's router alone.
+    /// A process's or a watcher's in the star: a client, linked to the launcher's router
+    /// alone.
     Client,
+    /// A process's in a launch linked directly: a peer linked to the launcher's router that
+    /// also links to the launch's other such peers as the router's gossip tells it of them.
+    LinkedPeer,
     /// A peer that links only where it is told (gossip off).
     Peer,
 }
@@ -638,23 +644,34 @@ impl Mode {
         match self {
             Mode::Router => "\"router\"",
             Mode::Client => "\"client\"",
-            Mode::Peer => "\"peer\"",
+            Mode::LinkedPeer | Mode::Peer => "\"peer\"",
         }
     }
 }
 
-/// Open the launcher's session: a Zenoh router listening on `listen` (endpoints already
-/// checked), authenticated as `access.role` (the launcher's router,
+/// The most processes a launch links directly to each other
+/// ([`launcher::LaunchOptions::star`], [`open_linked_peer`]): P (P − 1) / 2 links, 45 here.
+/// A larger launch is a star alone.
+pub const DIRECT_LINKS_MAX: usize = SMALL_LAUNCH;
+
+/// Open the launcher's session (or a host's router's): a Zenoh router listening on `listen`
+/// (endpoints already checked), authenticated as `access.role` (the launcher's router,
 /// [`credentials::Role::Router`]) by mutual TLS, and dropping what each identity that links
-/// to it may not say ([`access`]). Every process and watcher of the launch links to it and
-/// to nothing else, and it routes what they say to each other; it gossips nothing, so no
-/// two of them learn of each other.
+/// to it may not say ([`access`]). Every process and watcher of the launch links to it, and
+/// it routes what its clients say to each other. It tells the peers linked to it of each
+/// other (Zenoh's gossip), so that the processes of a launch linked directly (`direct`,
+/// [`open_linked_peer`]) link to each other; its clients (a star's processes, watchers) and
+/// other routers it tells nothing, so no two of them learn of each other.
 ///
 /// # Errors
 /// [`DistError::Usage`] when an endpoint cannot be used (a port in use) or the credentials
 /// lack the role's identity, else [`DistError::Zenoh`].
-pub fn open_router(listen: &[String], access: Access<'_>) -> Result<zenoh::Session, DistError> {
-    open_as(Mode::Router, listen, &[], access)
+pub fn open_router(
+    listen: &[String],
+    access: Access<'_>,
+    direct: bool,
+) -> Result<zenoh::Session, DistError> {
+    open_as((Mode::Router, direct), listen, &[], access)
 }
 
 /// Open a process's or a watcher's session: a Zenoh client of the launcher's router at
@@ -670,22 +687,45 @@ pub fn open_router(listen: &[String], access: Access<'_>) -> Result<zenoh::Sessi
 /// which each is expected to reach the others directly (peers do not relay for each
 /// other): two processes linked as peers to the router alone, gossip off, would not hear
 /// each other; with gossip on they would link to each other, the mesh again. A peer linked
-/// to the router alone still hears every client through it (`ratelab top`'s session).
+/// to the router alone still hears every client through it, but not the peers of a launch
+/// linked directly ([`open_linked_peer`]): it is taken for one of them, which reach each
+/// other directly. So every watcher is a client.
 ///
 /// # Errors
 /// [`DistError::Usage`] when nobody answers at `connect` or the TLS handshake is refused
 /// (another launch's credentials), or the credentials lack the role's identity, else
 /// [`DistError::Zenoh`].
 pub fn open_client(connect: &[String], access: Access<'_>) -> Result<zenoh::Session, DistError> {
-    open_as(Mode::Client, &[], connect, access)
+    open_as((Mode::Client, false), &[], connect, access)
+}
+
+/// Open a process's session in a launch linked directly: a Zenoh peer listening on `listen`
+/// (endpoints already checked; `tls/127.0.0.1:0` when the launcher starts it), linked to the
+/// launcher's router at `connect` and, as the router's gossip tells it of them, to every
+/// other process of the launch that listens (the one whose Zenoh id is greater opens the
+/// link). This is how rmw_zenoh deploys ROS 2 by default: a router for discovery, peers
+/// linked directly. In Zenoh 1.10 peers linked to each other form a region in which each
+/// reaches the others over their own link, so a sample or a lockstep report crosses one link
+/// where in the star ([`open_client`]) it crosses two; the router still hears what it
+/// subscribes to (the launcher's keys, a watcher's topics) and passes nothing from one peer
+/// to another. Authenticated as `access.role` by mutual TLS; every process checks what it
+/// receives from another by the graph's access rules ([`access`]), as the router does.
+///
+/// # Errors
+/// As [`open_client`]; also [`DistError::Usage`] when `listen` cannot be listened on.
+pub fn open_linked_peer(
+    listen: &[String],
+    connect: &[String],
+    access: Access<'_>,
+) -> Result<zenoh::Session, DistError> {
+    open_as((Mode::LinkedPeer, true), listen, connect, access)
 }
 
 /// Open a Zenoh session in peer mode with multicast scouting and gossip off, listening on
 /// `listen` and connecting to `connect` (endpoints already checked): it links to what it
 /// connects to and what connects to it, nothing else. Authenticated as `access.role` by
-/// mutual TLS, enforcing the graph's access control on what it receives. `ratelab top`
-/// opens one linked to a launcher's router; tests and the transport-floor examples link
-/// two directly.
+/// mutual TLS, enforcing the graph's access control on what it receives. Tests and the
+/// transport-floor examples link two directly.
 ///
 /// # Errors
 /// [`DistError::Usage`] when an endpoint cannot be used (a port in use) or the credentials
@@ -695,12 +735,14 @@ pub fn open_session(
     connect: &[String],
     access: Access<'_>,
 ) -> Result<zenoh::Session, DistError> {
-    open_as(Mode::Peer, listen, connect, access)
+    open_as((Mode::Peer, false), listen, connect, access)
 }
 
-/// Open a session of `mode` ([`open_router`], [`open_client`], [`open_session`]).
+/// Open a session of `mode` ([`open_router`], [`open_client`], [`open_linked_peer`],
+/// [`open_session`]), in a launch linked directly or not (`direct`: the access rules'
+/// [`access::acl`]).
 fn open_as(
-    mode: Mode,
+    (mode, direct): (Mode, bool),
     listen: &[String],
     connect: &[String],
     access: Access<'_>,
@@ -713,8 +755,43 @@ fn open_as(
     };
     set(&mut config, "mode", mode.json())?;
     set(&mut config, "scouting/multicast/enabled", "false")?;
-    // Nobody learns of anybody from anybody: each session links where it is told.
-    set(&mut config, "scouting/gossip/enabled", "false")?;
+    match mode {
+        // Nobody learns of anybody from anybody: each session links where it is told.
+        Mode::Client | Mode::Peer => set(&mut config, "scouting/gossip/enabled", "false")?,
+        // The router tells each peer linked to it of the others (one hop: they are all
+        // linked to it), and links to nobody it hears of; in a star it has no peers, and a
+        // client, a watcher or another host's router is not told.
+        Mode::Router => {
+            set(&mut config, "scouting/gossip/enabled", "true")?;
+            set(&mut config, "scouting/gossip/multihop", "false")?;
+            set(
+                &mut config,
+                "scouting/gossip/target",
+                r#"{"router": ["peer"]}"#,
+            )?;
+            set(
+                &mut config,
+                "scouting/gossip/autoconnect",
+                r#"{"router": []}"#,
+            )?;
+        }
+        // A peer links to the peers it hears of (the launch's other processes that listen;
+        // a watcher listens nowhere), one link a pair: the greater Zenoh id opens it.
+        Mode::LinkedPeer => {
+            set(&mut config, "scouting/gossip/enabled", "true")?;
+            set(&mut config, "scouting/gossip/multihop", "false")?;
+            set(
+                &mut config,
+                "scouting/gossip/autoconnect",
+                r#"{"peer": ["peer"]}"#,
+            )?;
+            set(
+                &mut config,
+                "scouting/gossip/autoconnect_strategy",
+                r#"{"peer": {"to_router": "always", "to_peer": "greater-zid"}}"#,
+            )?;
+        }
+    }
     if mode == Mode::Router {
         // A router waits this long after it opens for scouting (500 ms by default): there
         // is none.
@@ -781,7 +858,7 @@ fn open_as(
     let acl = access::acl(
         &keys,
         &access.credentials.processes,
-        access.spec,
+        (access.spec, direct),
         access.role,
     );
     set(&mut config, "access_control", &acl.to_string())?;

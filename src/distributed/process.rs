@@ -47,7 +47,7 @@ mod stats;
 mod stepper;
 
 use bridge::{bridge_outbound, wire_crossings, wire_links, Arrivals, Bridge, Inbound};
-use join::{check_options, recv_own, wait_matching, Joined};
+use join::{check_options, recv_own, Joined};
 
 use real_clock::real_clock;
 use stats::{held_topics, spawn_figures, Batch, StepTap};
@@ -66,11 +66,13 @@ pub struct ProcessOptions {
     pub graph_origin: String,
     /// The process to run (its name in the graph file).
     pub process: String,
-    /// Endpoints to connect to (the launcher's router): the process's one link.
+    /// Endpoints to connect to (the launcher's router, or its host's router).
     pub connect: Vec<String>,
-    /// Endpoints given to listen on (`--listen`): checked, and not used since a launch is a
-    /// star: a process links to its launcher's router alone and nothing links to it
-    /// ([`super::open_client`]), on one host or across hosts.
+    /// Endpoints to listen on for the launch's other processes (`--listen`): given, the
+    /// process is a peer that links to the others that listen, directly
+    /// ([`super::open_linked_peer`]; the launcher gives each process it starts in a launch
+    /// linked directly `tls/127.0.0.1:0`). Empty: a client of the router at `connect`, its
+    /// one link ([`super::open_client`]).
     pub listen: Vec<String>,
     /// The launch's credentials, holding this process's identity (`--credentials FILE`).
     pub credentials: Credentials,
@@ -132,13 +134,14 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     let block = zenoh::qos::CongestionControl::Block;
     let cfg = setup.run_config()?;
     let spec = cfg.graph.clone();
-    // Virtual clock: the other processes' tick reports as the launcher hands them on,
-    // subscribed to before this process says it is ready ([`lockstep::subscribe_relayed`]).
+    // Virtual clock: the other processes' tick reports as the launcher hands them on, or,
+    // linked directly, as they send them, subscribed to before this process says it is
+    // ready ([`declare_lockstep`]).
     let virtual_clock = cfg.clock == crate::ClockKind::Virtual;
     let (slot, nudged, lockstep_keys) = match virtual_clock {
         true => {
             let (slot, nudged) = stepper::Slot::shared(spec.clone());
-            let declared = declare_lockstep(&session, &keys, &opts.process, &slot)?;
+            let declared = declare_lockstep(&session, (&keys, &setup), &opts.process, &slot)?;
             (Some(slot), nudged, Some(declared))
         }
         false => (None, crossbeam_channel::never(), None),
@@ -148,7 +151,7 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     let core = build_share(&cfg, &setup.policy, &mine, &batch)?;
     let handles = core.handles().clone();
     let (inbound, inbound_ends, publishers) = wire_crossings(
-        &session,
+        (&session, setup.direct),
         &keys,
         &handles,
         (&mine, &opts.process),
@@ -160,12 +163,8 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         wire_latency,
     } = inbound_ends;
     let tokens = declare_tokens(&session, &keys, &spec, &mine, &opts.process)?;
-    // The launcher hears them before any process starts; the subscribing process
-    // subscribes before it says it is ready, and the run starts once all are.
-    let while_there = (Some(&launcher_gone), REPLY_TIMEOUT);
-    for (_, p) in &publishers {
-        wait_matching(p, stop, while_there, "the launcher")?;
-    }
+    let linked = (setup.direct && !opts.listen.is_empty()).then(|| spec.placement().len() - 1);
+    join::wait_heard(&session, (&publishers, linked), stop, &launcher_gone)?;
     let ticked_pub = session
         .declare_publisher(keys.ticked(&opts.process))
         .congestion_control(block)
@@ -336,16 +335,25 @@ fn report(
 }
 
 /// Declare what the lockstep needs of this process under the virtual clock: the other
-/// processes' tick reports, as the launcher hands them on, into `slot`. Kept alive for the
-/// run.
+/// processes' tick reports into `slot`, as the launcher hands them on
+/// ([`lockstep::subscribe_relayed`]), or, in a launch linked directly (`setup`), as each
+/// process sends them ([`lockstep::subscribe_reports`]). Kept alive for the run.
 fn declare_lockstep(
     session: &zenoh::Session,
-    keys: &Keys,
+    (keys, setup): (&Keys, &wire::Setup),
     process: &str,
     slot: &stepper::SharedSlot,
-) -> Result<zenoh::pubsub::Subscriber<()>, DistError> {
+) -> Result<Vec<zenoh::pubsub::Subscriber<()>>, DistError> {
     let slot = slot.clone();
-    lockstep::subscribe_relayed(session, keys, process, move |ms| slot.reports(ms))
+    let take = move |ms| slot.reports(ms);
+    if setup.direct {
+        let spec = setup.run_config()?.graph;
+        let names: Vec<String> = spec.placement().into_iter().map(|(p, _)| p).collect();
+        return lockstep::subscribe_reports(session, keys, &names, Some(process), take);
+    }
+    Ok(vec![lockstep::subscribe_relayed(
+        session, keys, process, take,
+    )?])
 }
 
 /// Discovery: a liveliness token per node of `mine`, per publisher and per subscriber

@@ -953,6 +953,7 @@ fn launch_across(
         .map_err(launch_error)?,
         ros2_domain: None,
         kill_processes,
+        star: false,
     };
     interrupted(stop)?;
     // Its own flag: what stops the launch from inside (a failed process) leaves the

@@ -116,9 +116,18 @@ pub(crate) fn free_port() -> u16 {
         .port()
 }
 
+/// The chapter's two processes, linked directly: each hears the other's reports and
+/// samples over their own link.
 #[test]
 fn virtual_lockstep_is_byte_identical_to_the_in_process_run() {
     assert_lockstep_equals_in_process(&[], &["graphs/cartpole.toml"]);
+}
+
+/// The same through the star (`--star`): the launcher hands each process the other's
+/// reports and passes the samples on.
+#[test]
+fn virtual_lockstep_through_the_star_is_byte_identical_too() {
+    assert_lockstep_equals_in_process(&[], &["graphs/cartpole.toml", "--star"]);
 }
 
 /// For seeds 0–2 at control 50 and 5 Hz, virtual clock: `launch LAUNCH_GRAPH --processes`
@@ -1863,16 +1872,17 @@ fn tcp_sockets(pid: u32) -> Vec<(String, u16, u16)> {
     sockets
 }
 
-/// A launch is a star (issue 76): every process links to the launcher's router and to
-/// nothing else (one established TCP connection, to the launcher's port, and no socket
-/// listening for others), and the launcher holds one link per process. The mesh of peers
-/// before it linked every pair: 28 links among these 8 processes, beside their 8 to the
-/// launcher.
-#[test]
-fn processes_link_to_the_launcher_alone() {
+/// A launch of `processes` processes (a generated graph, virtual clock, run long) with
+/// `extra` arguments, once every process is ready: per process, its TCP sockets
+/// ([`tcp_sockets`]); the launcher's; the launcher's port. Ended with Ctrl-C after `look`
+/// has looked.
+fn launch_sockets(
+    processes: usize,
+    extra: &[&str],
+    look: impl FnOnce(&[Vec<(String, u16, u16)>], &[(String, u16, u16)], u16),
+) {
     let _m = crate::machine::shared();
     let dir = tempfile::tempdir().unwrap();
-    let processes = 8;
     let g = crate::large_graphs::generated(dir.path(), "g.toml", 31, processes);
     let port = free_port();
     let mut launcher = bin()
@@ -1883,6 +1893,7 @@ fn processes_link_to_the_launcher_alone() {
             "--listen",
             &format!("tls/127.0.0.1:{port}"),
         ])
+        .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
@@ -1904,33 +1915,91 @@ fn processes_link_to_the_launcher_alone() {
     }
     let pids = processes_mentioning(&format!(":{port}"));
     assert_eq!(pids.len(), processes, "{pids:?}");
-    for pid in &pids {
-        let sockets = tcp_sockets(*pid);
-        let links: Vec<u16> = (sockets.iter())
-            .filter(|(state, ..)| state == "01")
-            .map(|&(_, _, remote)| remote)
-            .collect();
-        assert_eq!(
-            links,
-            [port],
-            "process {pid}: one link, the launcher's: {sockets:?}"
-        );
-        assert!(
-            !sockets.iter().any(|(state, ..)| state == "0A"),
-            "process {pid} listens: {sockets:?}"
-        );
-    }
-    let sockets = tcp_sockets(launcher.id());
-    let accepted = (sockets.iter())
-        .filter(|(state, local, _)| state == "01" && *local == port)
-        .count();
-    assert_eq!(accepted, processes, "the launcher's links: {sockets:?}");
+    let each: Vec<_> = pids.iter().map(|&pid| tcp_sockets(pid)).collect();
+    look(&each, &tcp_sockets(launcher.id()), port);
     // SAFETY: plain kill(2) on our child.
     unsafe { libc::kill(launcher.id() as i32, libc::SIGINT) };
     let status = exit_within(&mut launcher, 30);
     lines.extend(rx.try_iter());
     assert_eq!(status.code(), Some(130), "{lines:?}");
     assert_none_left(port, Duration::from_millis(500));
+}
+
+/// The established links among `sockets` (state `01`), each (local port, remote port).
+fn established(sockets: &[(String, u16, u16)]) -> Vec<(u16, u16)> {
+    (sockets.iter())
+        .filter(|(state, ..)| state == "01")
+        .map(|&(_, local, remote)| (local, remote))
+        .collect()
+}
+
+/// `launch --star` (issue 76): every process links to the launcher's router and to
+/// nothing else (one established TCP connection, to the launcher's port, and no socket
+/// listening for others), and the launcher holds one link per process. Linked directly
+/// (the test below) these 8 processes hold 28 links among them, beside their 8 to the
+/// launcher; a launch of more than 10 is a star without being told.
+#[test]
+fn a_star_links_every_process_to_the_launcher_alone() {
+    let processes = 8;
+    launch_sockets(processes, &["--star"], |each, launcher, port| {
+        for sockets in each {
+            let links: Vec<u16> = established(sockets).iter().map(|l| l.1).collect();
+            assert_eq!(links, [port], "one link, the launcher's: {sockets:?}");
+            assert!(
+                !sockets.iter().any(|(state, ..)| state == "0A"),
+                "a process listens: {sockets:?}"
+            );
+        }
+        let accepted = (established(launcher).iter())
+            .filter(|(local, _)| *local == port)
+            .count();
+        assert_eq!(accepted, processes, "the launcher's links: {launcher:?}");
+    });
+}
+
+/// A small launch is linked directly (issue 76 item 4): every process listens on a port of
+/// its own and links to the launcher's router and to every other process, one link a pair
+/// (28 among 8 processes), and the launcher still holds one link per process.
+#[test]
+fn a_small_launch_links_every_pair_of_processes_once() {
+    let processes = 8;
+    launch_sockets(processes, &[], |each, launcher, port| {
+        let listening: Vec<u16> = (each.iter())
+            .map(|sockets| {
+                let ports: Vec<u16> = (sockets.iter())
+                    .filter(|(state, ..)| state == "0A")
+                    .map(|s| s.1)
+                    .collect();
+                assert_eq!(ports.len(), 1, "one port to be linked to: {sockets:?}");
+                ports[0]
+            })
+            .collect();
+        let mut pairs = std::collections::BTreeSet::new();
+        for (i, sockets) in each.iter().enumerate() {
+            let links = established(sockets);
+            let to_launcher = links.iter().filter(|l| l.1 == port).count();
+            assert_eq!(to_launcher, 1, "one link to the launcher: {sockets:?}");
+            for &(local, remote) in &links {
+                // A link this process opened (to another's port), or one it accepted.
+                let other = (listening.iter().position(|&p| p == remote))
+                    .or_else(|| (local == listening[i]).then_some(usize::MAX));
+                match other {
+                    Some(usize::MAX) => {}
+                    Some(j) => assert!(pairs.insert((i.min(j), i.max(j))), "{i}-{j} twice"),
+                    None => assert_eq!(remote, port, "a link to neither: {sockets:?}"),
+                }
+            }
+        }
+        assert_eq!(
+            pairs.len(),
+            processes * (processes - 1) / 2,
+            "every pair linked once: {pairs:?}"
+        );
+        let accepted = (established(launcher).iter())
+            .filter(|(local, _)| *local == port)
+            .count();
+        assert_eq!(accepted, processes, "the launcher's links: {launcher:?}");
+    });
 }
 
 /// A launch of 128 processes, a 511-node generated graph dealt out to them, runs the run of

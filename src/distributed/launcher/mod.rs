@@ -7,7 +7,10 @@
 //! process and watcher links to it alone, and it passes on what they say to each other,
 //! each message checked by the identity that sent it ([`crate::access`]); the crossing
 //! topics' samples and the lockstep's reports it passes on from a thread of its own
-//! (`outbox`: Zenoh's one thread must never wait to send). A program that calls [`launch`]
+//! (`outbox`: Zenoh's one thread must never wait to send). A small launch whose processes
+//! it starts itself is linked directly ([`LaunchOptions::star`]): its processes also link
+//! to each other ([`crate::open_linked_peer`]) and send their samples and reports over
+//! those links, and the launcher follows the reports without passing anything on. A program that calls [`launch`]
 //! calls [`crate::set_zenoh_runtime`] first thing in its `main`, as the `ratelab` binary
 //! does: on Zenoh's default runtime the router's TLS links break under load
 //! (eclipse-zenoh/zenoh#2557; the tests get the setting from `.cargo/config.toml`).
@@ -30,7 +33,7 @@ use super::monitor::Carried;
 use super::wire::{self, Setup, ToLauncher, ToProcess};
 use super::{check_endpoint, check_keys, Access, DistError, Keys};
 use crossbeam_channel::Receiver;
-use processes::{wait_gate, Children};
+use processes::wait_gate;
 use ratelab_core::metrics::Metrics;
 use ratelab_core::time::Nanos;
 use ratelab_runtime::config::{ClockKind, RunConfig};
@@ -97,6 +100,21 @@ pub struct LaunchOptions {
     /// would: `launch --kill-process policy@3`), each once. A process whose graph says
     /// `restart = "on-failure"` is then started again and rejoins.
     pub kill_processes: Vec<(String, Nanos)>,
+    /// Link every process to the launcher's router alone (the star, `launch --star`), even
+    /// in a launch that is otherwise linked directly: one whose processes the launcher
+    /// starts itself ([`LaunchOptions::exe`]), [`crate::DIRECT_LINKS_MAX`] or fewer. Linked
+    /// directly, every process also links to every other ([`crate::open_linked_peer`]), and
+    /// a sample or a lockstep report crosses one link instead of two; processes started by
+    /// hand (on other hosts, behind their host's router) make a star.
+    pub star: bool,
+}
+
+impl LaunchOptions {
+    /// Whether a launch of `processes` processes with these options is linked directly
+    /// ([`LaunchOptions::star`]).
+    pub fn direct(&self, processes: usize) -> bool {
+        self.exe.is_some() && !self.star && processes <= crate::DIRECT_LINKS_MAX
+    }
 }
 
 pub use crate::MAX_STDERR_LINE;
@@ -466,6 +484,7 @@ pub fn launch(
     let names: Vec<String> = placement.iter().map(|(p, _)| p.clone()).collect();
     let processes = names.clone();
     let creds = &opts.credentials;
+    let direct = opts.direct(names.len());
     if creds.graph != spec.name || creds.processes != names {
         return Err(DistError::Usage(format!(
             "the credentials are for graph '{}' with processes {:?}, not '{}' with {names:?}",
@@ -474,7 +493,7 @@ pub fn launch(
     }
     // Peers refused at the TLS handshake (no credentials of this launch), said in the log.
     let refusals = super::refusals::Refusals::new();
-    let (session, endpoint) = listen(spec, opts)?;
+    let (session, endpoint) = listen(spec, opts, direct)?;
     let keys = Keys::new(&spec.name);
     let (_up_sub, up_rx) = hear_processes(&session, &keys)?;
     // What the launcher passes on to each process ([`outbox`]).
@@ -488,7 +507,8 @@ pub fn launch(
         placement,
         names,
         endpoint,
-        setup: setup_of(cfg, opts),
+        setup: setup_of(cfg, opts, direct),
+        direct,
         hash: super::graph_hash(&opts.graph_bytes),
         private: PrivateDir::new()?,
         link: Link {
@@ -504,6 +524,10 @@ pub fn launch(
     };
     let endpoint = me.endpoint.clone();
     me.say(&format!("listening on {endpoint}"));
+    me.say(match direct {
+        true => "the processes link to the launcher and to each other directly",
+        false => "a star: the processes link to the launcher alone",
+    });
     if cfg.clock == ClockKind::Virtual && !spec.restart.is_empty() {
         me.say(&format!(
             "restart = \"on-failure\" ({}) does not apply under the virtual clock: a lockstep cannot take a process back, so a process that fails ends the run",
@@ -518,31 +542,21 @@ pub fn launch(
     // when it is full under the real clock only); under the virtual clock every process's
     // tick reports too, to follow the run and hand each process the others' in its turn
     // ([`relay`]). Heard before any process starts.
+    // Linked directly, the processes send both to each other, and the launcher passes
+    // nothing on.
     let real = cfg.clock == ClockKind::Real;
-    let _forwarded = outbox::forward_topics(&session, &keys, spec, &outboxes, real)?;
+    let _forwarded = match direct {
+        true => Vec::new(),
+        false => outbox::forward_topics(&session, &keys, spec, &outboxes, real)?,
+    };
     let relaying = (!real)
-        .then(|| relay::Relay::start(&session, &keys, spec, (&processes[..], &outboxes)))
+        .then(|| relay::Relay::start(&session, &keys, spec, (&processes[..], &outboxes), direct))
         .transpose()?;
     let _launcher_token = session
         .liveliness()
         .declare_token(keys.launcher_token())
         .wait()?;
-    let mut children = Children(Vec::new());
-    if opts.exe.is_some() {
-        for (p, _) in &me.placement {
-            if let Some(child) = me.start_process(p)? {
-                children.0.push((p.clone(), child));
-            }
-        }
-    } else {
-        me.say(&format!(
-            "waiting for {} to join: ratelab process{} --process NAME --connect {endpoint} --credentials FILE (launch --export-credentials FILE)",
-            ratelab_core::text::listed(me.names.iter().map(String::as_str)),
-            opts.graph_path
-                .as_ref()
-                .map_or(String::new(), |g| format!(" --graph {}", g.display()))
-        ));
-    }
+    let mut children = me.start_processes()?;
     let _setup_queryable = serve_setup(&session, &keys, &me.setup)?;
     me.admit_until_ready(&mut children)?;
     if let Some(gate) = &opts.start_gate {
@@ -612,7 +626,7 @@ fn serve_setup(
 }
 
 /// The run's settings as every process of the launch and every watcher is given them.
-fn setup_of(cfg: &RunConfig, opts: &LaunchOptions) -> Setup {
+fn setup_of(cfg: &RunConfig, opts: &LaunchOptions, direct: bool) -> Setup {
     Setup {
         graph_toml: cfg.graph.to_toml(),
         seed: cfg.seed,
@@ -624,6 +638,7 @@ fn setup_of(cfg: &RunConfig, opts: &LaunchOptions) -> Setup {
         spin_margin_ns: cfg.spin_margin.0,
         rt_priority: cfg.rt_priority,
         ros2_domain: opts.ros2_domain,
+        direct,
     }
 }
 
@@ -690,16 +705,21 @@ fn watch_gone(
     Ok((sub, gone_rx, gone_now))
 }
 
-/// Open the launcher's session, the router of the launch's star: on `--listen` (port 0: a
-/// free one), else on ratelab's usual port when it is free (watchers look there), else on
-/// any free one. Returns the session and the endpoint it listens on.
-fn listen(spec: &GraphSpec, opts: &LaunchOptions) -> Result<(zenoh::Session, String), DistError> {
+/// Open the launcher's session, the router of the launch (linked directly or not,
+/// `direct`): on `--listen` (port 0: a free one), else on ratelab's usual port when it is
+/// free (watchers look there), else on any free one. Returns the session and the endpoint
+/// it listens on.
+fn listen(
+    spec: &GraphSpec,
+    opts: &LaunchOptions,
+    direct: bool,
+) -> Result<(zenoh::Session, String), DistError> {
     let access = Access {
         credentials: &opts.credentials,
         role: &Role::Router,
         spec: Some(spec),
     };
-    let open = |listen: &[String]| super::open_router(listen, access);
+    let open = |listen: &[String]| super::open_router(listen, access, direct);
     Ok(match &opts.listen {
         Some(ep) => {
             check_endpoint("--listen", ep, true)?;
@@ -739,6 +759,8 @@ struct Launch<'a> {
     endpoint: String,
     /// The run's settings, sent in every welcome.
     setup: Setup,
+    /// Whether the processes are linked directly ([`LaunchOptions::star`]).
+    direct: bool,
     /// The graph file's SHA-256, which every join must match.
     hash: String,
     /// Where each started process's credentials are written, removed with the launch.
@@ -864,6 +886,37 @@ impl Launch<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A launch is linked directly when the launcher starts its processes, they are at most
+    /// `DIRECT_LINKS_MAX`, and `--star` is not given; else a star.
+    #[test]
+    fn a_small_launch_started_here_is_linked_directly_unless_told_star() {
+        let names = ["robot".to_string(), "policy".to_string()];
+        let opts = |exe: bool, star: bool| LaunchOptions {
+            graph_path: None,
+            graph_bytes: Vec::new(),
+            listen: None,
+            policy: "scripted".into(),
+            exe: exe.then(|| Program::this().unwrap()),
+            child_stderr: None,
+            start_gate: None,
+            listening: None,
+            pace: None,
+            credentials: Credentials::generate("chapter", &names).unwrap(),
+            ros2_domain: None,
+            kill_processes: Vec::new(),
+            star,
+        };
+        let max = crate::DIRECT_LINKS_MAX;
+        assert!(opts(true, false).direct(2));
+        assert!(opts(true, false).direct(max));
+        assert!(
+            !opts(true, false).direct(max + 1),
+            "a large launch is a star"
+        );
+        assert!(!opts(true, true).direct(2), "--star");
+        assert!(!opts(false, false).direct(2), "processes started by hand");
+    }
 
     /// A 10 s run of the chapter's graph as process `robot` would report it.
     fn robot_report() -> (GraphSpec, GraphState) {

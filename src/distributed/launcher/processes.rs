@@ -11,6 +11,32 @@ use std::time::{Duration, Instant};
 use zenoh::Wait;
 
 impl Launch<'_> {
+    /// Start every process of the placement ([`Launch::start_process`]), or, when the
+    /// launch starts none, say how to start them by hand.
+    ///
+    /// # Errors
+    /// As [`Launch::start_process`].
+    pub(super) fn start_processes(&self) -> Result<Children, DistError> {
+        let mut children = Children(Vec::new());
+        if self.opts.exe.is_none() {
+            self.say(&format!(
+                "waiting for {} to join: ratelab process{} --process NAME --connect {} --credentials FILE (launch --export-credentials FILE)",
+                ratelab_core::text::listed(self.names.iter().map(String::as_str)),
+                self.opts
+                    .graph_path
+                    .as_ref()
+                    .map_or(String::new(), |g| format!(" --graph {}", g.display())),
+                self.endpoint
+            ));
+        }
+        for (p, _) in &self.placement {
+            if let Some(child) = self.start_process(p)? {
+                children.0.push((p.clone(), child));
+            }
+        }
+        Ok(children)
+    }
+
     /// Start (or start again) process `p` with its own credentials: `None` when the launch
     /// starts no process (they are started by hand, [`super::LaunchOptions::exe`]).
     ///
@@ -37,8 +63,12 @@ impl Launch<'_> {
         // Its own process group: a Ctrl-C at the terminal reaches the launcher only,
         // which then stops every process in order (their reports are merged).
         use std::os::unix::process::CommandExt as _;
-        cmd.args(["--process", p, "--connect", &self.endpoint])
-            .process_group(0)
+        cmd.args(["--process", p, "--connect", &self.endpoint]);
+        // Linked directly: the other processes link to it on a port of its own.
+        if self.direct {
+            cmd.args(["--listen", crate::LOOPBACK_ANY]);
+        }
+        cmd.process_group(0)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             // Piped always: its lines also go on the graph's log key, for a lab attached

@@ -11,7 +11,10 @@
 //! rest ([`Relay::hand_over_all`]), so each replays the whole run.
 //!
 //! So an instant in which P processes each run an event costs P messages in and P out,
-//! where each process sending its reports to every other cost P (P − 1). The messages go
+//! where each process sending its reports to every other cost P (P − 1). A launch linked
+//! directly ([`crate::launcher::LaunchOptions::star`]) is small, and there every process
+//! hears every other's reports itself, over their own link: the launcher follows them as
+//! here but hands nothing on ([`Course::relays`]). The messages go
 //! out through the launcher's outbox ([`super::outbox`]: from its own thread, as Zenoh's
 //! one thread must not wait to send, or when small and nothing is queued, at once), after
 //! any sample handed in before them; a process's report also tells its outbox that it
@@ -62,6 +65,9 @@ pub(super) struct Relay {
     course: Mutex<Option<Course>>,
     /// Tells the main thread to look: the horizon low, the run over.
     nudge: Sender<()>,
+    /// The processes are linked directly: they hear each other's reports
+    /// ([`Course::relays`]).
+    direct: bool,
 }
 
 /// A relay in place: the relay, the main thread's end of its nudges and the subscriptions
@@ -114,6 +120,9 @@ struct Course {
     given: Vec<u64>,
     /// The horizon the main thread last sent, ns.
     horizon: Option<u64>,
+    /// Whether the processes are handed the reports here (a star), or hear them from each
+    /// other (a launch linked directly): then every report counts as had once taken.
+    relays: bool,
     counts: Counts,
     end: Option<RunEnd>,
 }
@@ -225,6 +234,12 @@ impl Course {
     /// dropped.
     fn due(&mut self, process_of: &[usize]) -> Vec<(usize, Vec<u8>)> {
         let mut out = Vec::new();
+        if !self.relays {
+            let index = self.cursor.index();
+            self.given.iter_mut().for_each(|had| *had = index);
+            self.forget_handed();
+            return out;
+        }
         if self.end.is_none() {
             if let Some(e) = self.cursor.next() {
                 if let Some(&p) = process_of.get(e.node_at().0) {
@@ -244,9 +259,9 @@ impl Course {
     }
 
     /// Hand process `p` every report it has not had (not its own), in messages of at most
-    /// [`MAX_RELAYED`], onto `out`.
+    /// [`MAX_RELAYED`], onto `out` (none when the processes hear each other's reports).
     fn hand(&mut self, p: usize, process_of: &[usize], out: &mut Vec<(usize, Vec<u8>)>) {
-        let Some(given) = self.given.get_mut(p) else {
+        let Some(given) = self.given.get_mut(p).filter(|_| self.relays) else {
             return;
         };
         let index = self.cursor.index();
@@ -286,7 +301,8 @@ impl Relay {
     /// A relay for the processes `names` (placement order) of `spec`'s graph, on the
     /// launcher's `session` (the router): a publisher per process's relayed key, whose
     /// messages go out through `outbox`, and a subscription to every process's reports,
-    /// which it follows once the run begins ([`Relay::begin`]).
+    /// which it follows once the run begins ([`Relay::begin`]). `direct`: the processes
+    /// are linked directly and hear each other's reports; nothing is handed on.
     ///
     /// # Errors
     /// [`DistError::Zenoh`] when a publisher or subscriber cannot be declared.
@@ -295,6 +311,7 @@ impl Relay {
         keys: &Keys,
         spec: &GraphSpec,
         (names, outboxes): (&[String], &Outboxes),
+        direct: bool,
     ) -> Result<Relaying, DistError> {
         let block = zenoh::qos::CongestionControl::Block;
         let mut outs = Vec::with_capacity(names.len());
@@ -321,6 +338,7 @@ impl Relay {
             process_of,
             course: Mutex::new(None),
             nudge,
+            direct,
         });
         let taker = relay.clone();
         let subscribers = subscribe_reports(session, keys, names, None, move |ms| taker.take(ms))?;
@@ -352,6 +370,7 @@ impl Relay {
             log_from: 0,
             given: vec![0; self.outs.len()],
             horizon: None,
+            relays: !self.direct,
             counts: Counts {
                 published: vec![None; self.spec.topics.len()],
                 ..Counts::default()
@@ -559,6 +578,26 @@ mod tests {
         assert_eq!(c.given, vec![n; 3]);
     }
 
+    #[test]
+    fn linked_directly_nothing_is_handed_on_and_nothing_is_kept() {
+        // The processes hear each other's reports: none is handed on, whether a process's
+        // turn comes, it has waited past the bound, or the run ends, and the log is kept
+        // for nobody (a long run holds no reports).
+        let process_of = [0, 1, 2];
+        let n = 3 * MAX_RELAYED as u64;
+        let mut c = course_with(n);
+        c.relays = false;
+        assert!(c.due(&process_of).is_empty());
+        assert_eq!((c.log_from, c.log.len()), (n, 0));
+        assert_eq!(c.given, vec![n; 3]);
+        let mut out = Vec::new();
+        c.given = vec![0; 3];
+        for p in 0..3 {
+            c.hand(p, &process_of, &mut out);
+        }
+        assert!(out.is_empty(), "the end's hand-over hands nothing either");
+    }
+
     /// A course of the chapter's graph for `duration_ms`, nothing taken yet, and the run's
     /// events in order (drawn by a follower of its own).
     fn following(duration_ms: u64) -> (Course, Vec<Event>, RunConfig) {
@@ -582,6 +621,7 @@ mod tests {
             log_from: 0,
             given: vec![0; 2],
             horizon: None,
+            relays: true,
             counts: Counts {
                 published: vec![None; cfg.graph.topics.len()],
                 ..Counts::default()

@@ -256,10 +256,12 @@ pub(super) type Publishers = Vec<(TopicId, zenoh::pubsub::Publisher<'static>)>;
 /// the publisher's side of each outbound topic becomes a plain buffer (the subscriber's
 /// copy keeps the QoS) and gets a Zenoh publisher that never drops (a lost sample would
 /// stall the run), on the key through which the launcher passes its samples on
-/// ([`Keys::via`]); each inbound topic is subscribed to, on its key. Returns the inbound
-/// topics, their subscriptions and the outbound publishers.
+/// ([`Keys::via`]), or, in a launch linked directly (`direct`), on the topic's own key,
+/// which the subscribing processes hear over their own links; each inbound topic is
+/// subscribed to, on its key. Returns the inbound topics, their subscriptions and the
+/// outbound publishers.
 pub(super) fn wire_crossings(
-    session: &zenoh::Session,
+    (session, direct): (&zenoh::Session, bool),
     keys: &Keys,
     handles: &ratelab_runtime::graph::GraphHandles,
     (mine, process): (&[NodeId], &str),
@@ -279,7 +281,12 @@ pub(super) fn wire_crossings(
     let publishers = outbound
         .iter()
         .map(|&t| {
-            let key = keys.via(&spec.topic(t).name);
+            let name = &spec.topic(t).name;
+            let key = if direct {
+                keys.topic(name)
+            } else {
+                keys.via(name)
+            };
             let publisher = session.declare_publisher(key).congestion_control(block);
             Ok((t, publisher.wait()?))
         })

@@ -76,8 +76,12 @@ impl Joined {
             role: &role,
             spec: Some(file_spec),
         };
-        // A client of the launcher's router: its one link ([`crate::open_client`]).
-        let session = open_client(&opts.connect, access)?;
+        // A client of the launcher's router, its one link ([`crate::open_client`]), or,
+        // listening, a peer that the launch's other processes link to directly.
+        let session = match opts.listen.is_empty() {
+            true => open_client(&opts.connect, access)?,
+            false => crate::open_linked_peer(&opts.listen, &opts.connect, access)?,
+        };
         let keys = Keys::new(&file_spec.name);
         let (ctl_tx, ctl_rx) = crossbeam_channel::bounded::<ToProcess>(4096);
         let _ctl_sub = session
@@ -250,6 +254,70 @@ pub(super) fn wait_matching(
             )));
         }
         std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// Wait until what this process publishes across is heard: linked directly (`linked`: the
+/// launch's other processes, [`wait_linked`]) to each other process, and each of
+/// `publishers` matched by its subscriber (the launcher, or linked directly the subscribing
+/// process) while the launcher is there (not `gone`). The subscribing process subscribes
+/// before it says it is ready, and the run starts once all are.
+///
+/// # Errors
+/// As [`wait_linked`] and [`wait_matching`].
+pub(super) fn wait_heard(
+    session: &zenoh::Session,
+    (publishers, linked): (&super::bridge::Publishers, Option<usize>),
+    stop: &StopFlag,
+    launcher_gone: &StopFlag,
+) -> Result<(), DistError> {
+    let while_there = (Some(launcher_gone), REPLY_TIMEOUT);
+    if let Some(others) = linked {
+        wait_linked(session, others, stop, while_there)?;
+    }
+    let subscriber = match linked {
+        Some(_) => "the subscribing process",
+        None => "the launcher",
+    };
+    for (_, p) in publishers {
+        wait_matching(p, stop, while_there, subscriber)?;
+    }
+    Ok(())
+}
+
+/// Wait until this peer's `session` is linked to `others` peers (the launch's other
+/// processes, in a launch linked directly: [`crate::open_linked_peer`]), for `patience` at
+/// most, and not after the launcher is gone when `gone` watches it. Each link is opened as
+/// the launcher's router tells each process of the others (Zenoh's gossip): on one host,
+/// within milliseconds of the last process's start.
+///
+/// # Errors
+/// [`DistError::Peer`] on `stop`, the launcher gone, or fewer links after `patience`.
+pub(super) fn wait_linked(
+    session: &zenoh::Session,
+    others: usize,
+    stop: &StopFlag,
+    (gone, patience): (Option<&StopFlag>, Duration),
+) -> Result<(), DistError> {
+    let deadline = Instant::now() + patience;
+    loop {
+        let linked = session.info().peers_zid().wait().count();
+        if linked >= others {
+            return Ok(());
+        }
+        if stop.is_stopped() {
+            return Err(DistError::Peer("interrupted".into()));
+        }
+        if gone.is_some_and(StopFlag::is_stopped) {
+            return Err(DistError::Peer("the launcher went away".into()));
+        }
+        if Instant::now() >= deadline {
+            return Err(DistError::Peer(format!(
+                "linked directly to {linked} of the launch's {others} other processes within {} s (each listens on its --listen, and the launcher's router tells each of the others)",
+                patience.as_secs()
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(2));
     }
 }
 

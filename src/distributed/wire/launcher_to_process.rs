@@ -35,6 +35,13 @@ pub struct Setup {
     /// (`ratelab::ros2::bridge::Offer::local`); `None`: not offered.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ros2_domain: Option<u32>,
+    /// Whether the launch is linked directly ([`crate::launcher::LaunchOptions::star`]):
+    /// then a process puts its crossing topics' samples on their own keys and its lockstep
+    /// reports for every other process, which each hears directly ([`crate::Keys::topic`],
+    /// [`crate::Keys::ticked`]); else on `@via` for the launcher to pass on, and it hears
+    /// the others' reports from the launcher ([`crate::Keys::relayed`]).
+    #[serde(default)]
+    pub direct: bool,
 }
 
 impl Setup {

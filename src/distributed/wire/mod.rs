@@ -381,6 +381,7 @@ mod tests {
             rt_priority: None,
             spin_margin_ns: 0,
             ros2_domain: None,
+            direct: true,
         };
         let bytes = serde_json::to_vec(&setup).unwrap();
         let back = decode_json::<Setup>(&bytes).unwrap();
