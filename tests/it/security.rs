@@ -117,8 +117,24 @@ fn counting(
     (n, sub)
 }
 
+/// In a star, a process's topic is put on `@via` for the launcher to pass on, never on its
+/// own key.
 #[test]
 fn an_identity_publishes_only_what_the_graph_gives_it() {
+    identity_publishes(false);
+}
+
+/// Linked directly, the process that publishes a topic may also put it on its own key
+/// (the other processes hear it there), and still nobody else may: a session checking by
+/// the rules of a launch linked directly ([`ratelab::distributed::open_linked_peer`]).
+#[test]
+fn linked_directly_an_identity_publishes_its_own_topics_on_their_keys_and_nothing_more() {
+    identity_publishes(true);
+}
+
+/// Each identity's puts, tokens and control as the launcher's session receives them, the
+/// session checking by the rules of a star or, `direct`, of a launch linked directly.
+fn identity_publishes(direct: bool) {
     let _m = crate::machine::shared();
     let spec = GraphSpec::parse(DEFAULT_GRAPH_TOML, "chapter").unwrap();
     let keys = Keys::new(&spec.name);
@@ -126,14 +142,24 @@ fn an_identity_publishes_only_what_the_graph_gives_it() {
     let ep = format!("tls/127.0.0.1:{}", free_port());
     // The launcher's session, which hears what processes publish for it to pass on
     // (`@via/action`), and here also the topic's own key and the robot's control key.
-    let launcher = session(
-        &creds,
-        Role::Launcher,
-        Some(&spec),
-        std::slice::from_ref(&ep),
-        &[],
-    )
-    .unwrap();
+    let launcher = match direct {
+        false => session(
+            &creds,
+            Role::Launcher,
+            Some(&spec),
+            std::slice::from_ref(&ep),
+            &[],
+        )
+        .unwrap(),
+        true => {
+            let access = Access {
+                credentials: &creds,
+                role: &Role::Launcher,
+                spec: Some(&spec),
+            };
+            ratelab::distributed::open_linked_peer(std::slice::from_ref(&ep), &[], access).unwrap()
+        }
+    };
     let (via, _v) = counting(&launcher, &keys.via("/action"));
     let (topic, _t) = counting(&launcher, &keys.topic("/action"));
     let (control, _c) = counting(&launcher, &keys.control("robot"));
@@ -224,11 +250,12 @@ fn an_identity_publishes_only_what_the_graph_gives_it() {
     );
     assert_eq!(attempt(Role::Observer, (0, 0, 0, 0)), (0, 0, 0, 0));
     // The policy's identity may publish the force for the launcher to pass on, not on the
-    // topic's own key (the router's), nor control; its own node's token
+    // topic's own key (the router's) but linked directly, nor control; its own node's token
     // (`@node/policy/policy`) arrives declared, then withdrawn.
+    let own_key = if direct { 20 } else { 0 };
     assert_eq!(
-        attempt(Role::Process("policy".into()), (20, 0, 0, 2)),
-        (20, 0, 0, 2)
+        attempt(Role::Process("policy".into()), (20, own_key, 0, 2)),
+        (20, own_key, 0, 2)
     );
     // The launcher may control.
     assert_eq!(attempt(Role::Launcher, (0, 0, 20, 0)), (0, 0, 20, 0));
