@@ -27,7 +27,7 @@
 //! frozen watcher subscribed to it holds the whole star, as it held the lockstep before,
 //! until Zenoh closes its link (5 s).
 //!
-//! A launch is a star ([`super::open_router`]): every process and watcher links to the
+//! A large launch is a star ([`super::open_router`]): every process and watcher links to the
 //! launcher's router alone, so the check that matters is the router's, on each message
 //! as it arrives from the identity that sent it; what the router then passes on arrives
 //! at the others under the router's identity, which may say anything (the launcher
@@ -85,7 +85,7 @@ const AT_KEYS: [&str; 13] = [
 
 /// The `@` keys everyone may read: all but the launch's own traffic (`@ctl`, `@up`,
 /// `@ticked`, `@relayed`, `@via`), which only the launcher hears (a process its own control
-/// and relayed reports).
+/// and relayed reports, and linked directly the other processes' ticks).
 const LAUNCH_TRAFFIC_FREE: [&str; 8] = [
     "@node/**",
     "@pub/**",
@@ -203,8 +203,10 @@ pub fn acl(
         ),
     ];
     own(&Role::Launcher, launcher);
-    if *hearer != Role::Router {
-        // Its clients, and any session linked to it, hear it as their router.
+    if *hearer != Role::Router && !direct {
+        // Its clients, and any session linked to it, hear it as their router; a process
+        // linked directly is never behind one (it listens: anyone holding that certificate
+        // could link to it).
         own(&Role::HostRouter, vec![routed.clone()]);
     }
     own(&Role::Router, vec![routed]);

@@ -71,7 +71,7 @@ pub enum Role {
     /// A watcher (`ratelab top`, `lab --attach`, the lab beside its launch): it reads, and
     /// publishes nothing the graph acts on.
     Observer,
-    /// The launcher's session as the router of the launch's star ([`super::open_router`]):
+    /// The launcher's session as the router of the launch ([`super::open_router`]):
     /// it passes on what every other identity says, each message checked on arrival by the
     /// identity it came from, and what the launcher itself says. Only the launcher holds it.
     Router,

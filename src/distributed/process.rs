@@ -151,7 +151,7 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     let core = build_share(&cfg, &setup.policy, &mine, &batch)?;
     let handles = core.handles().clone();
     let (inbound, inbound_ends, publishers) = wire_crossings(
-        (&session, setup.direct),
+        (&session, setup.direct, !virtual_clock),
         &keys,
         &handles,
         (&mine, &opts.process),

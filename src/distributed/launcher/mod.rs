@@ -3,8 +3,8 @@
 //! time authority under the virtual clock; the common start under the real one), stops
 //! every process it started, and merges their reports into one `metrics.json`.
 //!
-//! The launcher's session is the router of the launch's star ([`crate::open_router`]): every
-//! process and watcher links to it alone, and it passes on what they say to each other,
+//! The launcher's session is the router of the launch ([`crate::open_router`]): in a star
+//! every process and watcher links to it alone, and it passes on what they say to each other,
 //! each message checked by the identity that sent it ([`crate::access`]); the crossing
 //! topics' samples and the lockstep's reports it passes on from a thread of its own
 //! (`outbox`: Zenoh's one thread must never wait to send). A small launch whose processes

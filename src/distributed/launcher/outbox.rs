@@ -1,6 +1,8 @@
-//! What the launcher passes on to the processes from Zenoh's thread (the crossing topics'
-//! samples and the lockstep's relayed reports): sent from a thread of its own, or, for a
-//! small message with nothing queued ahead of it, put there and then.
+//! What the launcher passes on to the processes of a star from Zenoh's thread (the crossing
+//! topics' samples and the lockstep's relayed reports): sent from a thread of its own, or,
+//! for a small message with nothing queued ahead of it, put there and then. (In a launch
+//! linked directly the processes send both to each other and nothing passes here but the
+//! reports handed on at the end.)
 //!
 //! The launcher's session is the router of the launch's star, and Zenoh runs it on one
 //! thread ([`crate::ZENOH_RUNTIME`]): the thread that receives a message is the one that

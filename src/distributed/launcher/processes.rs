@@ -30,7 +30,7 @@ impl Launch<'_> {
             ));
         }
         for (p, _) in &self.placement {
-            if let Some(child) = self.start_process(p)? {
+            if let Some(child) = self.start_process(p, self.direct)? {
                 children.0.push((p.clone(), child));
             }
         }
@@ -39,11 +39,15 @@ impl Launch<'_> {
 
     /// Start (or start again) process `p` with its own credentials: `None` when the launch
     /// starts no process (they are started by hand, [`super::LaunchOptions::exe`]).
+    /// `listen`: the process listens for the launch's other processes, which link to it
+    /// directly (a launch linked directly, at its start). A process started again mid-run
+    /// (real clock) is a client of the router: its wait for links to every other process
+    /// would fail were one of them gone, and the router brokers between it and the peers.
     ///
     /// # Errors
     /// [`DistError::Usage`] when its credentials cannot be written or the binary cannot
     /// start.
-    pub(super) fn start_process(&self, p: &str) -> Result<Option<Child>, DistError> {
+    pub(super) fn start_process(&self, p: &str, listen: bool) -> Result<Option<Child>, DistError> {
         let Some(exe) = &self.opts.exe else {
             return Ok(None);
         };
@@ -65,7 +69,7 @@ impl Launch<'_> {
         use std::os::unix::process::CommandExt as _;
         cmd.args(["--process", p, "--connect", &self.endpoint]);
         // Linked directly: the other processes link to it on a port of its own.
-        if self.direct {
+        if listen {
             cmd.args(["--listen", crate::LOOPBACK_ANY]);
         }
         cmd.process_group(0)

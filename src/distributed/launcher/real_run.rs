@@ -280,7 +280,7 @@ impl Supervision {
             }
             *n += 1;
             let n = *n;
-            match l.start_process(p) {
+            match l.start_process(p, false) {
                 Ok(Some(c)) => {
                     l.say(&format!(
                         "process '{p}' failed ({status}) at t={:.3}s: starting it again (restart = \"on-failure\", {n} of {MAX_RESTARTS})",

@@ -14,7 +14,9 @@
 //! where each process sending its reports to every other cost P (P − 1). A launch linked
 //! directly ([`crate::launcher::LaunchOptions::star`]) is small, and there every process
 //! hears every other's reports itself, over their own link: the launcher follows them as
-//! here but hands nothing on ([`Course::relays`]). The messages go
+//! here but hands nothing on during the run ([`Course::relays`]); at its end it hands each
+//! process the last [`MAX_RELAYED`] it took, in case a process went before its last
+//! reports reached the others (a process ignores those it has). The messages go
 //! out through the launcher's outbox ([`super::outbox`]: from its own thread, as Zenoh's
 //! one thread must not wait to send, or when small and nothing is queued, at once), after
 //! any sample handed in before them; a process's report also tells its outbox that it
@@ -121,7 +123,8 @@ struct Course {
     /// The horizon the main thread last sent, ns.
     horizon: Option<u64>,
     /// Whether the processes are handed the reports here (a star), or hear them from each
-    /// other (a launch linked directly): then every report counts as had once taken.
+    /// other (a launch linked directly): then every report but the last [`MAX_RELAYED`]
+    /// counts as had once taken, and those are handed on at the end.
     relays: bool,
     counts: Counts,
     end: Option<RunEnd>,
@@ -235,8 +238,10 @@ impl Course {
     fn due(&mut self, process_of: &[usize]) -> Vec<(usize, Vec<u8>)> {
         let mut out = Vec::new();
         if !self.relays {
-            let index = self.cursor.index();
-            self.given.iter_mut().for_each(|had| *had = index);
+            let tail = self.cursor.index().saturating_sub(MAX_RELAYED as u64);
+            self.given
+                .iter_mut()
+                .for_each(|had| *had = (*had).max(tail));
             self.forget_handed();
             return out;
         }
@@ -259,9 +264,9 @@ impl Course {
     }
 
     /// Hand process `p` every report it has not had (not its own), in messages of at most
-    /// [`MAX_RELAYED`], onto `out` (none when the processes hear each other's reports).
+    /// [`MAX_RELAYED`], onto `out`.
     fn hand(&mut self, p: usize, process_of: &[usize], out: &mut Vec<(usize, Vec<u8>)>) {
-        let Some(given) = self.given.get_mut(p).filter(|_| self.relays) else {
+        let Some(given) = self.given.get_mut(p) else {
             return;
         };
         let index = self.cursor.index();
@@ -579,23 +584,36 @@ mod tests {
     }
 
     #[test]
-    fn linked_directly_nothing_is_handed_on_and_nothing_is_kept() {
-        // The processes hear each other's reports: none is handed on, whether a process's
-        // turn comes, it has waited past the bound, or the run ends, and the log is kept
-        // for nobody (a long run holds no reports).
+    fn linked_directly_only_the_last_reports_are_kept_and_handed_on_at_the_end() {
+        // The processes hear each other's reports: none is handed on during the run,
+        // whether a process's turn comes or it has waited past the bound, and only the
+        // last MAX_RELAYED are kept (a long run holds no more); at the end those go to
+        // every process, in case one went before its last reports reached the others.
         let process_of = [0, 1, 2];
         let n = 3 * MAX_RELAYED as u64;
         let mut c = course_with(n);
         c.relays = false;
         assert!(c.due(&process_of).is_empty());
-        assert_eq!((c.log_from, c.log.len()), (n, 0));
-        assert_eq!(c.given, vec![n; 3]);
+        let tail = n - MAX_RELAYED as u64;
+        assert_eq!((c.log_from, c.log.len()), (tail, MAX_RELAYED));
+        assert_eq!(c.given, vec![tail; 3]);
         let mut out = Vec::new();
-        c.given = vec![0; 3];
         for p in 0..3 {
             c.hand(p, &process_of, &mut out);
         }
-        assert!(out.is_empty(), "the end's hand-over hands nothing either");
+        for (p, bytes) in &out {
+            let got = decoded(bytes);
+            assert!(
+                got.iter().all(|&i| i >= tail && i % 3 != *p as u64),
+                "{p}: {got:?}"
+            );
+        }
+        let handed: usize = out.iter().map(|(_, b)| decoded(b).len()).sum();
+        assert_eq!(
+            handed,
+            2 * MAX_RELAYED,
+            "each of the tail to the two others"
+        );
     }
 
     /// A course of the chapter's graph for `duration_ms`, nothing taken yet, and the run's

@@ -259,9 +259,12 @@ pub(super) type Publishers = Vec<(TopicId, zenoh::pubsub::Publisher<'static>)>;
 /// ([`Keys::via`]), or, in a launch linked directly (`direct`), on the topic's own key,
 /// which the subscribing processes hear over their own links; each inbound topic is
 /// subscribed to, on its key. Returns the inbound topics, their subscriptions and the
-/// outbound publishers.
+/// outbound publishers. Linked directly under the real clock (`real`), a publisher drops
+/// what a full link cannot take (counted lost on the wire by the subscriber), as the
+/// launcher's outbox does in a star, so that a frozen subscriber never holds up the
+/// publishing tick.
 pub(super) fn wire_crossings(
-    (session, direct): (&zenoh::Session, bool),
+    (session, direct, real): (&zenoh::Session, bool, bool),
     keys: &Keys,
     handles: &ratelab_runtime::graph::GraphHandles,
     (mine, process): (&[NodeId], &str),
@@ -277,7 +280,10 @@ pub(super) fn wire_crossings(
         handles.topic(t).set_matched(true);
     }
     let ends = subscribe_inbound(session, keys, spec, handles, (&inbound, slot), process)?;
-    let block = zenoh::qos::CongestionControl::Block;
+    let congestion = match direct && real {
+        true => zenoh::qos::CongestionControl::Drop,
+        false => zenoh::qos::CongestionControl::Block,
+    };
     let publishers = outbound
         .iter()
         .map(|&t| {
@@ -287,7 +293,9 @@ pub(super) fn wire_crossings(
             } else {
                 keys.via(name)
             };
-            let publisher = session.declare_publisher(key).congestion_control(block);
+            let publisher = session
+                .declare_publisher(key)
+                .congestion_control(congestion);
             Ok((t, publisher.wait()?))
         })
         .collect::<Result<_, DistError>>()?;
