@@ -755,42 +755,32 @@ fn open_as(
     };
     set(&mut config, "mode", mode.json())?;
     set(&mut config, "scouting/multicast/enabled", "false")?;
-    match mode {
+    let gossip: &[(&str, &str)] = match mode {
         // Nobody learns of anybody from anybody: each session links where it is told.
-        Mode::Client | Mode::Peer => set(&mut config, "scouting/gossip/enabled", "false")?,
+        Mode::Client | Mode::Peer => &[("enabled", "false")],
         // The router tells each peer linked to it of the others (one hop: they are all
         // linked to it), and links to nobody it hears of; in a star it has no peers, and a
         // client, a watcher or another host's router is not told.
-        Mode::Router => {
-            set(&mut config, "scouting/gossip/enabled", "true")?;
-            set(&mut config, "scouting/gossip/multihop", "false")?;
-            set(
-                &mut config,
-                "scouting/gossip/target",
-                r#"{"router": ["peer"]}"#,
-            )?;
-            set(
-                &mut config,
-                "scouting/gossip/autoconnect",
-                r#"{"router": []}"#,
-            )?;
-        }
+        Mode::Router => &[
+            ("enabled", "true"),
+            ("multihop", "false"),
+            ("target", r#"{"router": ["peer"]}"#),
+            ("autoconnect", r#"{"router": []}"#),
+        ],
         // A peer links to the peers it hears of (the launch's other processes that listen;
         // a watcher listens nowhere), one link a pair: the greater Zenoh id opens it.
-        Mode::LinkedPeer => {
-            set(&mut config, "scouting/gossip/enabled", "true")?;
-            set(&mut config, "scouting/gossip/multihop", "false")?;
-            set(
-                &mut config,
-                "scouting/gossip/autoconnect",
-                r#"{"peer": ["peer"]}"#,
-            )?;
-            set(
-                &mut config,
-                "scouting/gossip/autoconnect_strategy",
+        Mode::LinkedPeer => &[
+            ("enabled", "true"),
+            ("multihop", "false"),
+            ("autoconnect", r#"{"peer": ["peer"]}"#),
+            (
+                "autoconnect_strategy",
                 r#"{"peer": {"to_router": "always", "to_peer": "greater-zid"}}"#,
-            )?;
-        }
+            ),
+        ],
+    };
+    for (k, v) in gossip {
+        set(&mut config, &format!("scouting/gossip/{k}"), v)?;
     }
     if mode == Mode::Router {
         // A router waits this long after it opens for scouting (500 ms by default): there

@@ -141,7 +141,8 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     let (slot, nudged, lockstep_keys) = match virtual_clock {
         true => {
             let (slot, nudged) = stepper::Slot::shared(spec.clone());
-            let declared = declare_lockstep(&session, (&keys, &setup), &opts.process, &slot)?;
+            let declared =
+                declare_lockstep(&session, (&keys, &spec, setup.direct), &opts.process, &slot)?;
             (Some(slot), nudged, Some(declared))
         }
         false => (None, crossbeam_channel::never(), None),
@@ -336,18 +337,17 @@ fn report(
 
 /// Declare what the lockstep needs of this process under the virtual clock: the other
 /// processes' tick reports into `slot`, as the launcher hands them on
-/// ([`lockstep::subscribe_relayed`]), or, in a launch linked directly (`setup`), as each
-/// process sends them ([`lockstep::subscribe_reports`]). Kept alive for the run.
+/// ([`lockstep::subscribe_relayed`]), or, in a launch linked directly (`direct`), as each
+/// process of `spec` sends them ([`lockstep::subscribe_reports`]). Kept alive for the run.
 fn declare_lockstep(
     session: &zenoh::Session,
-    (keys, setup): (&Keys, &wire::Setup),
+    (keys, spec, direct): (&Keys, &GraphSpec, bool),
     process: &str,
     slot: &stepper::SharedSlot,
 ) -> Result<Vec<zenoh::pubsub::Subscriber<()>>, DistError> {
     let slot = slot.clone();
     let take = move |ms| slot.reports(ms);
-    if setup.direct {
-        let spec = setup.run_config()?.graph;
+    if direct {
         let names: Vec<String> = spec.placement().into_iter().map(|(p, _)| p).collect();
         return lockstep::subscribe_reports(session, keys, &names, Some(process), take);
     }
