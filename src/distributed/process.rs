@@ -337,23 +337,63 @@ fn report(
 
 /// Declare what the lockstep needs of this process under the virtual clock: the other
 /// processes' tick reports into `slot`, as the launcher hands them on
-/// ([`lockstep::subscribe_relayed`]), or, in a launch linked directly (`direct`), as each
-/// process of `spec` sends them ([`lockstep::subscribe_reports`]). Kept alive for the run.
+/// ([`lockstep::subscribe_relayed`]), and, in a launch linked directly (`direct`), as each
+/// process of `spec` sends them ([`lockstep::subscribe_reports`]). Linked directly, the
+/// launcher hands on nothing during the run, but at its end it hands on the last reports it
+/// took ([`crate::launcher`]'s relay), in case a process went before its own reached this
+/// one; a report that comes both ways counts once ([`lockstep::TickInbox::accept`]). Kept
+/// alive for the run.
 fn declare_lockstep(
     session: &zenoh::Session,
     (keys, spec, direct): (&Keys, &GraphSpec, bool),
     process: &str,
     slot: &stepper::SharedSlot,
 ) -> Result<Vec<zenoh::pubsub::Subscriber<()>>, DistError> {
-    let slot = slot.clone();
-    let take = move |ms| slot.reports(ms);
-    if direct {
-        let names: Vec<String> = spec.placement().into_iter().map(|(p, _)| p).collect();
-        return lockstep::subscribe_reports(session, keys, &names, Some(process), take);
+    let mut subs = Vec::new();
+    let mut ticked = Vec::new();
+    for source in report_sources(spec, direct, process) {
+        let slot = slot.clone();
+        let take = move |ms| slot.reports(ms);
+        match source {
+            ReportSource::Relayed => {
+                subs.push(lockstep::subscribe_relayed(session, keys, process, take)?)
+            }
+            ReportSource::Ticked(p) => ticked.push(p),
+        }
     }
-    Ok(vec![lockstep::subscribe_relayed(
-        session, keys, process, take,
-    )?])
+    if !ticked.is_empty() {
+        let slot = slot.clone();
+        let take = move |ms| slot.reports(ms);
+        subs.extend(lockstep::subscribe_reports(
+            session, keys, &ticked, None, take,
+        )?);
+    }
+    Ok(subs)
+}
+
+/// Where a process hears the other processes' tick reports under the virtual clock.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum ReportSource {
+    /// As the launcher hands them on to it (`@relayed/<own>`).
+    Relayed,
+    /// As process `.0` sends them (`@ticked/<.0>`).
+    Ticked(String),
+}
+
+/// [`declare_lockstep`]'s sources for process `process` of `spec`: always the launcher's
+/// hand-on (in a star, every report; linked directly, the last ones at the run's end), and,
+/// linked directly (`direct`), each other process's own reports.
+fn report_sources(spec: &GraphSpec, direct: bool, process: &str) -> Vec<ReportSource> {
+    let mut sources = vec![ReportSource::Relayed];
+    if direct {
+        sources.extend(
+            (spec.placement().into_iter())
+                .map(|(p, _)| p)
+                .filter(|p| p != process)
+                .map(ReportSource::Ticked),
+        );
+    }
+    sources
 }
 
 /// Discovery: a liveliness token per node of `mine`, per publisher and per subscriber
@@ -617,6 +657,28 @@ mod tests {
         }
     }
 
+    /// Where a process hears the others' tick reports, as a table. Linked directly it hears
+    /// each other process itself and still the launcher's hand-on: at a run's end the
+    /// launcher hands on the reports of a process that went before its own last ones
+    /// reached the others (without that, a process killed mid-run left the other waiting
+    /// 20 s for them: seen in CI under load).
+    #[test]
+    fn a_process_hears_the_launchers_hand_on_in_either_topology() {
+        use super::{report_sources, ReportSource::*};
+        let spec = GraphSpec::chapter();
+        let table = [
+            ("robot", false, vec![Relayed]),
+            ("robot", true, vec![Relayed, Ticked("policy".into())]),
+            ("policy", true, vec![Relayed, Ticked("robot".into())]),
+        ];
+        for (process, direct, want) in table {
+            assert_eq!(
+                report_sources(&spec, direct, process),
+                want,
+                "{process} {direct}"
+            );
+        }
+    }
     #[test]
     fn a_crossing_topic_sends_each_message_as_it_is_published_and_names_the_newest() {
         // A session of its own, on no network: Zenoh hands a session's puts to its own
