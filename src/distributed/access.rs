@@ -10,8 +10,8 @@
 //! | who | may publish (`put`) | may declare |
 //! |---|---|---|
 //! | everyone | nothing | subscribers, queries, liveliness subscribers and queries on the graph's topics, tokens (`@node`, `@pub`, `@sub`, `@launcher`), figures (`@stats`), settings (`@setup`), log and end |
-//! | the launcher | control (`@ctl/*`), the end (`@ended`), progress lines (`@log`) | its token `@launcher`, the settings' queryable `@setup` (and its replies); subscribers to the launch's own traffic: reports (`@up`), ticks (`@ticked`), the samples it passes on (`@via`), control and relayed reports |
-//! | process `P` | the topics its nodes publish, on `@via/<topic>` for the launcher to pass on (in a launch linked directly, on the topic's own key), its reports `@up/P`, ticks `@ticked/P`, counters `@stats/P` | its nodes' tokens `@node/P/*`, their endpoints' `@pub`/`@sub` tokens; subscribers to its own control `@ctl/P` and relayed reports `@relayed/P` (linked directly, also to the other processes' ticks `@ticked/*`) |
+//! | the launcher | control (`@ctl/*`), the end (`@ended`), progress lines (`@log`) | its token `@launcher`, the settings' queryable `@setup` (and its replies); subscribers to the launch's own traffic: reports (`@up`), ticks (`@ticked`; linked directly, the processes' batches of them, `@progress`), the samples it passes on (`@via`), control and relayed reports |
+//! | process `P` | the topics its nodes publish, on `@via/<topic>` for the launcher to pass on (in a launch linked directly, on the topic's own key), its reports `@up/P`, ticks `@ticked/P` (linked directly, also in batches for the launcher, `@progress/P`), counters `@stats/P` | its nodes' tokens `@node/P/*`, their endpoints' `@pub`/`@sub` tokens; subscribers to its own control `@ctl/P` and relayed reports `@relayed/P` (linked directly, also to the other processes' ticks `@ticked/*`) |
 //! | an observer | nothing | nothing more |
 //! | the launcher's router | anything on the graph's keys | anything on the graph's keys |
 //! | a host's router, heard by the launcher's router | the processes' kinds of keys (`@up`, `@ticked`, `@via`, `@stats`) | node and endpoint tokens; reads of any key |
@@ -67,13 +67,14 @@ use ratelab_runtime::graph::NodeId;
 use serde_json::{json, Value};
 
 /// The `@` keys of a graph (each must be named: `**` does not match them).
-const AT_KEYS: [&str; 13] = [
+const AT_KEYS: [&str; 14] = [
     "@node/**",
     "@pub/**",
     "@sub/**",
     "@ctl/**",
     "@up/**",
     "@ticked/**",
+    "@progress/**",
     "@relayed/**",
     "@via/**",
     "@stats/**",
@@ -84,7 +85,7 @@ const AT_KEYS: [&str; 13] = [
 ];
 
 /// The `@` keys everyone may read: all but the launch's own traffic (`@ctl`, `@up`,
-/// `@ticked`, `@relayed`, `@via`), which only the launcher hears (a process its own control
+/// `@ticked`, `@progress`, `@relayed`, `@via`), which only the launcher hears (a process its own control
 /// and relayed reports, and linked directly the other processes' ticks).
 const LAUNCH_TRAFFIC_FREE: [&str; 8] = [
     "@node/**",
@@ -284,6 +285,10 @@ fn process_keys(
         keys.ticked(proc_name),
         keys.stats(proc_name),
     ];
+    if direct {
+        // Its reports in batches, for the launcher to follow.
+        puts.push(keys.progress(proc_name));
+    }
     let mut tokens = vec![format!("{p}/@node/{proc_name}/**")];
     match spec {
         Some(spec) => {
@@ -399,6 +404,15 @@ mod tests {
         for k in ["action", "@via/action"] {
             assert!(!robot.contains(&format!("{p}/{k}")), "{k}: {robot:?}");
         }
+        // And its own reports in batches for the launcher to follow: only linked
+        // directly, and never another's.
+        assert!(robot.contains(&keys.progress("robot")), "{robot:?}");
+        assert!(!robot.contains(&keys.progress("policy")), "{robot:?}");
+        let star_robot = allowed(&acl, &Role::Process("robot".into()), "put");
+        assert!(
+            !star_robot.iter().any(|k| k.contains("@progress")),
+            "{star_robot:?}"
+        );
         assert!(!policy.iter().any(|k| k.ends_with("obs")), "{policy:?}");
         assert!(!policy.iter().any(|k| k.contains("@ctl")), "{policy:?}");
         assert_eq!(
@@ -476,10 +490,13 @@ mod tests {
             let acl = acl(&keys, &procs, (shape, direct), &Role::Router);
             let subs = |role: &Role| allowed(&acl, role, "declare_subscriber");
             let launcher = subs(&Role::Launcher);
-            for k in ["@via/**", "@up/**", "@ticked/**", "@ctl/**", "@relayed/**"] {
-                assert!(launcher.contains(&format!("{p}/{k}")), "{k}: {launcher:?}");
+            let traffic = ["@via", "@up", "@ticked", "@progress", "@ctl", "@relayed"];
+            for k in traffic {
+                assert!(
+                    launcher.contains(&format!("{p}/{k}/**")),
+                    "{k}: {launcher:?}"
+                );
             }
-            let traffic = ["@via", "@up", "@ticked", "@ctl", "@relayed"];
             let observer = subs(&Role::Observer);
             assert!(observer.contains(&format!("{p}/**")), "{observer:?}");
             assert!(observer.contains(&format!("{p}/@stats/**")), "{observer:?}");

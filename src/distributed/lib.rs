@@ -403,6 +403,14 @@ impl Keys {
         format!("{}/@relayed/{p}", self.prefix)
     }
 
+    /// Virtual clock, a launch linked directly: where process `p` sends the launcher its
+    /// tick reports to follow, in batches ([`wire::Ticked`], up to
+    /// [`lockstep::FOLLOWED_BATCH`] to a message, and always before it waits for the
+    /// horizon), while the other processes hear each report on [`Keys::ticked`].
+    pub fn progress(&self, p: &str) -> String {
+        format!("{}/@progress/{p}", self.prefix)
+    }
+
     /// Where each process publishes its live counters for `ratelab top`.
     pub fn stats(&self, p: &str) -> String {
         format!("{}/@stats/{p}", self.prefix)

@@ -88,6 +88,24 @@ pub fn horizon_periods(order: &ratelab_runtime::runcore::Follower, paced: bool) 
     periods
 }
 
+/// In a launch linked directly, the most of its own tick reports a process keeps before it
+/// sends them to the launcher to follow ([`Keys::progress`]); it sends what it has kept
+/// before it waits for the horizon, and at its run's end, whatever the count. The other
+/// processes hear every report as it is made ([`Keys::ticked`]): only the launcher's view,
+/// which moves the horizon and counts the run, comes in batches. Following every report
+/// cost the launcher 77 µs of CPU an instant of the chapter's launch, on a machine of 2
+/// cores where the processes whose turn it was needed them (BENCHMARKS.md, issue 76 item 4).
+/// 32 is a chapter's instant or two of robot and policy reports; a horizon reaches 8 to 64
+/// periods ahead ([`horizon_periods`]), so the launcher hears of a run's progress long
+/// before the horizon is reached.
+pub const FOLLOWED_BATCH: usize = 32;
+
+/// In a launch linked directly, how long a process keeps a report for the launcher at most
+/// (sent when the process next looks: at once while it runs, within 100 ms when it waits
+/// on a process that is gone), so that the launcher's view of a run that stalls catches up
+/// with the processes'.
+pub const FOLLOWED_MAX_AGE: std::time::Duration = std::time::Duration::from_millis(50);
+
 /// The most reports of other processes' ticks one process (or the launcher) keeps ahead of
 /// their turn (each process runs at most to the horizon, so a run holds at most the other
 /// processes' ticks of one horizon, [`horizon_periods`]).
@@ -127,6 +145,11 @@ impl TickInbox {
         }
         self.ahead.insert(m.index, m);
         Ok(())
+    }
+
+    /// The latest run time of a report kept ahead of its turn, ns (`None`: none is).
+    pub fn newest_ns(&self) -> Option<u64> {
+        self.ahead.values().map(|m| m.t_ns).max()
     }
 
     /// The report of tick `index`, if it is in (the reports before it are then given up).
@@ -212,12 +235,38 @@ pub fn subscribe_reports(
     own: Option<&str>,
     take: impl Fn(Vec<Ticked>) + Send + Sync + 'static,
 ) -> Result<Vec<zenoh::pubsub::Subscriber<()>>, DistError> {
+    subscribe_reports_on(session, |p| keys.ticked(p), processes, own, take)
+}
+
+/// The launcher of a launch linked directly: [`subscribe_reports`] on the batches each
+/// process sends it to follow ([`Keys::progress`]).
+///
+/// # Errors
+/// [`DistError::Zenoh`] when a subscriber cannot be declared.
+pub fn subscribe_progress(
+    session: &zenoh::Session,
+    keys: &Keys,
+    processes: &[String],
+    take: impl Fn(Vec<Ticked>) + Send + Sync + 'static,
+) -> Result<Vec<zenoh::pubsub::Subscriber<()>>, DistError> {
+    subscribe_reports_on(session, |p| keys.progress(p), processes, None, take)
+}
+
+/// [`subscribe_reports`] on the key `key_of` gives each process (its last chunk the
+/// process's name, as [`decode_report`] checks).
+fn subscribe_reports_on(
+    session: &zenoh::Session,
+    key_of: impl Fn(&str) -> String,
+    processes: &[String],
+    own: Option<&str>,
+    take: impl Fn(Vec<Ticked>) + Send + Sync + 'static,
+) -> Result<Vec<zenoh::pubsub::Subscriber<()>>, DistError> {
     let take = std::sync::Arc::new(take);
     let mut subs = Vec::with_capacity(processes.len());
     for p in processes.iter().filter(|p| Some(p.as_str()) != own) {
         let (take, own) = (take.clone(), own.map(str::to_string));
         let sub = session
-            .declare_subscriber(keys.ticked(p))
+            .declare_subscriber(key_of(p))
             .callback(move |s| {
                 let bytes = s.payload().to_bytes();
                 if let Some(ms) = decode_report(s.key_expr().as_str(), &bytes, own.as_deref()) {
@@ -287,6 +336,27 @@ pub(crate) mod tests {
             publish: false,
             compute_ns: 0,
         }
+    }
+
+    /// The launcher, linked directly, ends a run whose process is gone where the furthest
+    /// of the others got: the latest run time among the reports kept ahead of their turn.
+    #[test]
+    fn the_newest_report_kept_ahead_is_the_furthest_a_process_got() {
+        let spec = GraphSpec::chapter();
+        let mut inbox = TickInbox::new();
+        assert_eq!(inbox.newest_ns(), None);
+        let sensor = spec.node_id("sensor").unwrap().0;
+        for (index, t_ns) in [(5, 100), (9, 300), (7, 200)] {
+            let m = Ticked {
+                t_ns,
+                ..report(&spec.process_of(NodeId(sensor)), index, sensor)
+            };
+            inbox.accept(m, &spec).unwrap();
+        }
+        assert_eq!(inbox.newest_ns(), Some(300));
+        // Taken in turn, a report is no longer ahead.
+        inbox.take(9).unwrap();
+        assert_eq!(inbox.newest_ns(), None);
     }
 
     /// The horizon reaches 64 periods ahead for the chapter's graph, 8 when paced, and

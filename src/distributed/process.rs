@@ -170,6 +170,16 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         .declare_publisher(keys.ticked(&opts.process))
         .congestion_control(block)
         .wait()?;
+    // Linked directly, the launcher follows this process's reports in batches.
+    let progress_pub = match setup.direct {
+        true => Some(
+            session
+                .declare_publisher(keys.progress(&opts.process))
+                .congestion_control(block)
+                .wait()?,
+        ),
+        false => None,
+    };
     // --ros2: this process offers its own nodes; the plant's process `/clock` too. Before
     // saying ready: the wait for external nodes must not eat into the run.
     let ros2 = match setup.ros2_domain {
@@ -217,8 +227,12 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         &share,
         (slot.as_ref(), &nudged),
         (&ctl_rx, stop, &launcher_gone),
-        // Under --ros2 a tick may wait on Zenoh: never on Zenoh's own thread.
-        (ticked_pub, ros2.is_none()),
+        stepper::Reporting {
+            ticked: ticked_pub,
+            progress: progress_pub,
+            // Under --ros2 a tick may wait on Zenoh: never on Zenoh's own thread.
+            callback_ticks: ros2.is_none(),
+        },
         (&say, &send),
     );
     stats_done.stop();
@@ -434,7 +448,7 @@ fn run_share(
     share: &Arc<Share>,
     (slot, nudged): (Option<&stepper::SharedSlot>, &Receiver<()>),
     (ctl_rx, stop, launcher_gone): (&Receiver<ToProcess>, &StopFlag, &StopFlag),
-    ticked: (zenoh::pubsub::Publisher<'static>, bool),
+    reporting: stepper::Reporting,
     (say, send): (&dyn Fn(String), SendUp<'_>),
 ) -> Result<GraphState, DistError> {
     let me = &share.process;
@@ -444,7 +458,7 @@ fn run_share(
             share,
             (slot, nudged),
             ctl_rx,
-            ticked,
+            reporting,
             stop,
             launcher_gone,
         ),

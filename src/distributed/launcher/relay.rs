@@ -24,7 +24,9 @@
 //! horizon must move on.
 
 use super::outbox::{Out, Outbox, Outboxes};
-use crate::lockstep::{check_tick_report, horizon_periods, subscribe_reports, TickInbox};
+use crate::lockstep::{
+    check_tick_report, horizon_periods, subscribe_progress, subscribe_reports, TickInbox,
+};
 use crate::wire::{self, Ticked, MAX_RELAYED};
 use crate::{DistError, Keys};
 use crossbeam_channel::{Receiver, Sender};
@@ -346,7 +348,14 @@ impl Relay {
             direct,
         });
         let taker = relay.clone();
-        let subscribers = subscribe_reports(session, keys, names, None, move |ms| taker.take(ms))?;
+        // Linked directly, each process sends the launcher its reports in batches to follow
+        // (`lockstep::FOLLOWED_BATCH`), where the others hear each as it is made.
+        let take = move |ms| taker.take(ms);
+        let subscribers = if direct {
+            subscribe_progress(session, keys, names, take)?
+        } else {
+            subscribe_reports(session, keys, names, None, take)?
+        };
         Ok(Relaying {
             relay,
             nudged,
@@ -430,6 +439,22 @@ impl Relay {
                 outbox.put(out, bytes.into(), false);
             }
         }
+    }
+
+    /// The processes send the launcher their reports in batches (linked directly): its
+    /// view of the run may be behind theirs.
+    pub(super) fn follows_in_batches(&self) -> bool {
+        self.direct
+    }
+
+    /// The latest run time a process reported an event at, among the reports kept ahead of
+    /// their turn. Linked directly, a process that is gone may have sent the others
+    /// reports it never sent the launcher, and they ran on to here.
+    pub(super) fn newest_reported(&self) -> Option<Nanos> {
+        lock(&self.course)
+            .as_ref()
+            .and_then(|c| c.inbox.newest_ns())
+            .map(Nanos)
     }
 
     /// Where the run is.

@@ -104,6 +104,8 @@ impl Launch<'_> {
         let mut horizon: Option<u64> = None;
         let (mut seen, mut waiting_since) = (u64::MAX, Instant::now());
         let mut interrupted_at: Option<Instant> = None;
+        // Since a process went: the launcher's view's index, when it last moved, and since.
+        let mut settling: Option<(u64, Instant, Instant)> = None;
         loop {
             self.say_refusals_due();
             let now = relay.progress();
@@ -145,14 +147,29 @@ impl Launch<'_> {
                 .iter()
                 .find(|p| self.names.contains(p))
                 .cloned();
-            if let Some(p) = gone {
+            // Linked directly, the launcher hears the others' reports in batches: it ends
+            // the run once they stop coming, at the first event nobody ran.
+            let settled = !relay.follows_in_batches()
+                || gone.is_some() && {
+                    let (index, changed, since) =
+                        settling.get_or_insert((now.index, Instant::now(), Instant::now()));
+                    if *index != now.index {
+                        (*index, *changed) = (now.index, Instant::now());
+                    }
+                    changed.elapsed() >= FOLLOWED_SETTLE || since.elapsed() >= FOLLOWED_SETTLE_MAX
+                };
+            if let Some(p) = gone.filter(|_| settled) {
                 // The failed node is the gone process's (its first), not the awaited one.
                 let node = (self.placement.iter())
                     .find(|(name, _)| *name == p)
                     .and_then(|(_, ids)| ids.first().map(|n| n.0))
                     .unwrap_or(i);
                 let message = format!("process '{p}' is gone");
-                return Ok(relay.finish(failed(spec, node, t, message)));
+                // Linked directly, the others may have run on past the launcher's view, on
+                // reports of the gone process's that only they had: the run ends where the
+                // furthest of them got.
+                let at = relay.newest_reported().map_or(t, |n| n.max(t));
+                return Ok(relay.finish(failed(spec, node, at, message)));
             }
             if now.index != seen || beyond {
                 (seen, waiting_since) = (now.index, Instant::now());
@@ -186,6 +203,14 @@ impl Launch<'_> {
         }
     }
 }
+
+/// Linked directly, once a process is gone: how long the launcher's view of the run must
+/// stand still (no batch of reports moving it, [`crate::lockstep::FOLLOWED_BATCH`]) before
+/// the run ends there, and how long it waits for that at most. A process sends what it has
+/// kept within [`crate::lockstep::FOLLOWED_MAX_AGE`] of making it, once its main thread
+/// looks again (every 100 ms when nothing comes).
+const FOLLOWED_SETTLE: Duration = Duration::from_millis(300);
+const FOLLOWED_SETTLE_MAX: Duration = Duration::from_secs(2);
 
 /// How long after a process is seen gone, once the run is stopped, its report may still
 /// come. A process keeps its tokens until the launcher has its report

@@ -17,7 +17,7 @@
 
 use super::stats::{held_topics, read_counters};
 use super::Share;
-use crate::lockstep::{check_tick_report, TickInbox};
+use crate::lockstep::{self, check_tick_report, TickInbox};
 use crate::wire::ToProcess;
 use crate::wire::{self, Ticked};
 use crate::{DistError, REPLY_TIMEOUT};
@@ -191,7 +191,69 @@ struct Turns {
     kept_at: Option<Instant>,
     /// Where its reports go ([`crate::Keys::ticked`]).
     publisher: zenoh::pubsub::Publisher<'static>,
+    /// Linked directly: its reports sent, kept for the launcher to follow in batches.
+    followed: Option<Followed>,
+    /// The last event looked at lay past the horizon: the run waits for the launcher here.
+    at_horizon: bool,
     stop: StopFlag,
+}
+
+/// Where a process's tick reports go under the virtual clock, and where its ticks run.
+pub(super) struct Reporting {
+    /// Every report, as it is made, to whoever follows this process's ticks
+    /// ([`crate::Keys::ticked`]: in a star the launcher, which hands them on; linked
+    /// directly, the other processes).
+    pub ticked: zenoh::pubsub::Publisher<'static>,
+    /// Linked directly: the launcher's copy, in batches ([`crate::Keys::progress`],
+    /// [`crate::lockstep::FOLLOWED_BATCH`]).
+    pub progress: Option<zenoh::pubsub::Publisher<'static>>,
+    /// Ticks may run in a Zenoh callback at all (not under `--ros2`).
+    pub callback_ticks: bool,
+}
+
+/// A launch linked directly: the reports sent to the other processes and not yet to the
+/// launcher, and where they go.
+struct Followed {
+    publisher: zenoh::pubsub::Publisher<'static>,
+    batch: FollowedBatch,
+}
+
+/// The reports a process keeps for the launcher to follow ([`lockstep::FOLLOWED_BATCH`]):
+/// when they are due, and the messages they make.
+#[derive(Debug, Default)]
+struct FollowedBatch {
+    kept: Vec<Ticked>,
+    /// When the oldest of `kept` was kept.
+    since: Option<Instant>,
+}
+
+impl FollowedBatch {
+    /// Keep `reports` (emptied), sent to the other processes just now.
+    fn keep(&mut self, reports: &mut Vec<Ticked>) {
+        if !reports.is_empty() {
+            self.since.get_or_insert_with(Instant::now);
+            self.kept.append(reports);
+        }
+    }
+
+    /// Whether what is kept is due to the launcher: any report when the run waits for the
+    /// horizon or is over here (`waiting`), or kept for [`lockstep::FOLLOWED_MAX_AGE`];
+    /// else once [`lockstep::FOLLOWED_BATCH`] are kept.
+    fn due(&self, waiting: bool) -> bool {
+        let overdue = (self.since).is_some_and(|t| t.elapsed() >= lockstep::FOLLOWED_MAX_AGE);
+        !self.kept.is_empty() && (waiting || overdue || self.kept.len() >= lockstep::FOLLOWED_BATCH)
+    }
+
+    /// What is kept, as messages of at most [`wire::MAX_TICKS_PER_MESSAGE`] reports each,
+    /// in order; nothing is kept after.
+    fn take_messages(&mut self) -> Vec<Vec<u8>> {
+        let messages = (self.kept.chunks(wire::MAX_TICKS_PER_MESSAGE))
+            .map(wire::encode_reports)
+            .collect();
+        self.kept.clear();
+        self.since = None;
+        messages
+    }
 }
 
 impl Stepper {
@@ -201,10 +263,14 @@ impl Stepper {
     pub(super) fn new(
         core: RunCore,
         share: Arc<Share>,
-        publisher: zenoh::pubsub::Publisher<'static>,
+        reporting: Reporting,
         stop: StopFlag,
-        callback_ticks: bool,
     ) -> Self {
+        let Reporting {
+            ticked: publisher,
+            progress,
+            callback_ticks,
+        } = reporting;
         let held = held_topics(&share.cfg.graph, &share.mine);
         let turns = Turns {
             held,
@@ -217,6 +283,11 @@ impl Stepper {
             callback_ticks,
             kept_at: None,
             publisher,
+            followed: progress.map(|publisher| Followed {
+                publisher,
+                batch: FollowedBatch::default(),
+            }),
+            at_horizon: false,
             stop,
             share,
         };
@@ -289,6 +360,10 @@ impl Stepper {
             return ran.map(|_| true);
         }
         self.turns.flush()?;
+        // The launcher follows in batches: before the run waits for it to move the
+        // horizon, and at the run's end here, it has every report made.
+        let waiting = self.turns.at_horizon || self.done || self.cursor.limit.is_some();
+        self.turns.send_followed(waiting)?;
         ran
     }
 
@@ -299,6 +374,7 @@ impl Stepper {
         if self.done {
             return Ok(false);
         }
+        self.turns.at_horizon = false;
         let stop = self.turns.stop.clone();
         let mut turn = Advance {
             turns: &mut self.turns,
@@ -344,6 +420,7 @@ impl<'c> DrivePolicy<Event, Events<'c>> for Advance<'_> {
         let t = &mut *self.turns;
         let (i, at) = event.node_at();
         if t.horizon_ns.is_none_or(|h| h < at.0) {
+            t.at_horizon = true;
             return Ok(Turn::Wait);
         }
         if t.outbox.len() >= wire::MAX_TICKS_PER_MESSAGE {
@@ -502,9 +579,30 @@ impl Turns {
             return Ok(());
         }
         let bytes = wire::encode_reports(&self.outbox);
-        self.outbox.clear();
         self.kept_at = None;
         self.publisher.put(bytes).wait()?;
+        match self.followed.as_mut() {
+            Some(f) => {
+                f.batch.keep(&mut self.outbox);
+                self.send_followed(false)?;
+            }
+            None => self.outbox.clear(),
+        }
+        Ok(())
+    }
+
+    /// Linked directly: send the launcher the reports kept for it to follow when they are
+    /// due ([`FollowedBatch::due`]; `waiting`: the run waits here for the launcher, or is
+    /// over).
+    fn send_followed(&mut self, waiting: bool) -> Result<(), DistError> {
+        let Some(f) = self.followed.as_mut() else {
+            return Ok(());
+        };
+        if f.batch.due(waiting) {
+            for bytes in f.batch.take_messages() {
+                f.publisher.put(bytes).wait()?;
+            }
+        }
         Ok(())
     }
 }
@@ -524,11 +622,11 @@ pub(super) fn run_lockstep(
     share: &Arc<Share>,
     (slot, nudged): (&SharedSlot, &Receiver<()>),
     ctl: &Receiver<ToProcess>,
-    (publisher, callback_ticks): (zenoh::pubsub::Publisher<'static>, bool),
+    reporting: Reporting,
     stop: &StopFlag,
     launcher_gone: &StopFlag,
 ) -> Result<GraphState, DistError> {
-    let run = Stepper::new(core, share.clone(), publisher, stop.clone(), callback_ticks);
+    let run = Stepper::new(core, share.clone(), reporting, stop.clone());
     *ratelab_runtime::graph::lock(&slot.run) = Some(run);
     slot.wake(true);
     let failed = |e: DistError| {
@@ -644,5 +742,58 @@ fn take_the_rest(
             recv(nudged) -> _ => {},
             default(Duration::from_millis(20)) => {},
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::FollowedBatch;
+    use crate::lockstep::tests::report;
+    use crate::lockstep::{FOLLOWED_BATCH, FOLLOWED_MAX_AGE};
+    use crate::wire::{self, MAX_TICKS_PER_MESSAGE};
+    use std::time::{Duration, Instant};
+
+    /// Linked directly, the launcher hears a process's reports in batches: a full batch, or
+    /// any kept when the run waits for it here or the oldest has waited long enough; never
+    /// an empty message. What it is sent is every report kept, in order, in messages the
+    /// launcher accepts.
+    #[test]
+    fn the_launcher_follows_a_process_in_batches_and_before_it_waits() {
+        let mut b = FollowedBatch::default();
+        assert!(!b.due(true), "nothing kept: nothing due, even waiting");
+        let mut made: Vec<_> = (0..FOLLOWED_BATCH as u64 - 1)
+            .map(|i| report("robot", i, 0))
+            .collect();
+        b.keep(&mut made);
+        assert!(made.is_empty());
+        assert!(!b.due(false), "one short of a batch");
+        assert!(
+            b.due(true),
+            "the run waits for the launcher: due whatever the count"
+        );
+        b.keep(&mut vec![report("robot", FOLLOWED_BATCH as u64 - 1, 0)]);
+        assert!(b.due(false), "a full batch");
+        // Kept long enough: due one at a time.
+        let mut one = FollowedBatch::default();
+        one.keep(&mut vec![report("robot", 0, 0)]);
+        assert!(!one.due(false));
+        one.since = Some(Instant::now() - FOLLOWED_MAX_AGE - Duration::from_millis(1));
+        assert!(one.due(false), "overdue");
+        // Many kept at once (a process that waited long for the horizon): in messages the
+        // launcher decodes, every report once, in order; then nothing is kept.
+        let n = 3 * MAX_TICKS_PER_MESSAGE as u64 + 5;
+        b.keep(
+            &mut (FOLLOWED_BATCH as u64..n)
+                .map(|i| report("robot", i, 0))
+                .collect(),
+        );
+        let messages = b.take_messages();
+        assert_eq!(messages.len(), 4);
+        let got: Vec<u64> = (messages.iter())
+            .flat_map(|m| wire::decode_reports(m).unwrap())
+            .map(|m| m.index)
+            .collect();
+        assert_eq!(got, (0..n).collect::<Vec<_>>());
+        assert!(!b.due(true) && b.take_messages().is_empty() && b.since.is_none());
     }
 }
