@@ -34,10 +34,12 @@
 //! the events it has seen reported (8 when a lab paces the run; up to 64 otherwise), and ends the run early by not moving it on (a Ctrl-C).
 //!
 //! In a launch linked directly ([`crate::open_linked_peer`]) the processes are linked to each
-//! other, and a process's message of reports goes to every other process as well as to the
-//! launcher ([`subscribe_reports`]): between two events of different processes there is one
-//! message over their own link. The launcher follows the reports as above, and moves the
-//! horizon, but hands nothing on until the end.
+//! other, and a process's message of reports goes to every other process
+//! ([`subscribe_reports`]): between two events of different processes there is one message
+//! over their own link. The launcher hears the same reports in batches
+//! ([`subscribe_progress`], [`FOLLOWED_BATCH`]: always before a process waits for the
+//! horizon), follows them as above, and moves the horizon, but hands nothing on until the
+//! end.
 //! Following the reports, it knows the end (a stop, a failure, a process gone) and the
 //! last seq of every topic before the processes report.
 //!

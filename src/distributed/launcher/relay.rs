@@ -14,7 +14,9 @@
 //! where each process sending its reports to every other cost P (P − 1). A launch linked
 //! directly ([`crate::launcher::LaunchOptions::star`]) is small, and there every process
 //! hears every other's reports itself, over their own link: the launcher follows them as
-//! here but hands nothing on during the run ([`Course::relays`]); at its end it hands each
+//! here, from the batches each process sends it ([`crate::Keys::progress`],
+//! [`crate::lockstep::FOLLOWED_BATCH`]), but hands nothing on during the run
+//! ([`Course::relays`]); at its end it hands each
 //! process the last [`MAX_RELAYED`] it took, in case a process went before its last
 //! reports reached the others (a process ignores those it has). The messages go
 //! out through the launcher's outbox ([`super::outbox`]: from its own thread, as Zenoh's
