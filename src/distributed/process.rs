@@ -129,9 +129,6 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         opts.connect.join(", ")
     ));
     let send = |m: &ToLauncher| up.put(wire::encode_json(m)).wait();
-    // Samples and reports are never dropped under congestion (Zenoh's default drops): a
-    // lost one would stall the run.
-    let block = zenoh::qos::CongestionControl::Block;
     let cfg = setup.run_config()?;
     let spec = cfg.graph.clone();
     // Virtual clock: the other processes' tick reports as the launcher hands them on, or,
@@ -166,20 +163,7 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     let tokens = declare_tokens(&session, &keys, &spec, &mine, &opts.process)?;
     let linked = (setup.direct && !opts.listen.is_empty()).then(|| spec.placement().len() - 1);
     join::wait_heard(&session, (&publishers, linked), stop, &launcher_gone)?;
-    let ticked_pub = session
-        .declare_publisher(keys.ticked(&opts.process))
-        .congestion_control(block)
-        .wait()?;
-    // Linked directly, the launcher follows this process's reports in batches.
-    let progress_pub = match setup.direct {
-        true => Some(
-            session
-                .declare_publisher(keys.progress(&opts.process))
-                .congestion_control(block)
-                .wait()?,
-        ),
-        false => None,
-    };
+    let mut reporting = stepper::Reporting::declare(&session, &keys, &opts.process, setup.direct)?;
     // --ros2: this process offers its own nodes; the plant's process `/clock` too. Before
     // saying ready: the wait for external nodes must not eat into the run.
     let ros2 = match setup.ros2_domain {
@@ -227,11 +211,10 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         &share,
         (slot.as_ref(), &nudged),
         (&ctl_rx, stop, &launcher_gone),
-        stepper::Reporting {
-            ticked: ticked_pub,
-            progress: progress_pub,
+        {
             // Under --ros2 a tick may wait on Zenoh: never on Zenoh's own thread.
-            callback_ticks: ros2.is_none(),
+            reporting.callback_ticks = ros2.is_none();
+            reporting
         },
         (&say, &send),
     );

@@ -211,6 +211,38 @@ pub(super) struct Reporting {
     pub callback_ticks: bool,
 }
 
+impl Reporting {
+    /// Process `process`'s publishers of its reports on `session` (`direct`: linked
+    /// directly, the launcher's copy too), its ticks allowed in Zenoh's callbacks.
+    ///
+    /// # Errors
+    /// [`DistError::Zenoh`] when a publisher cannot be declared.
+    pub(super) fn declare(
+        session: &zenoh::Session,
+        keys: &crate::Keys,
+        process: &str,
+        direct: bool,
+    ) -> Result<Self, DistError> {
+        // Never dropped under congestion (Zenoh's default drops): a lost report would stall
+        // the run.
+        let declare = |key: String| {
+            session
+                .declare_publisher(key)
+                .congestion_control(zenoh::qos::CongestionControl::Block)
+                .wait()
+        };
+        Ok(Reporting {
+            ticked: declare(keys.ticked(process))?,
+            progress: if direct {
+                Some(declare(keys.progress(process))?)
+            } else {
+                None
+            },
+            callback_ticks: true,
+        })
+    }
+}
+
 /// A launch linked directly: the reports sent to the other processes and not yet to the
 /// launcher, and where they go.
 struct Followed {
