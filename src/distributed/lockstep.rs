@@ -41,7 +41,10 @@
 //! horizon), follows them as above, and moves the horizon, but hands nothing on until the
 //! end.
 //! Following the reports, it knows the end (a stop, a failure, a process gone) and the
-//! last seq of every topic before the processes report.
+//! last seq of every topic before the processes report. Linked directly it knows them as
+//! far as the batches have come: a run it ends early (a process gone, Ctrl-C, a process
+//! that does not answer) ends where the furthest report it holds says, as the others may
+//! have run on reports it never had.
 //!
 //! This is conservative parallel discrete-event simulation in the sense of Chandy and
 //! Misra ("Distributed simulation: a case study in design and verification of distributed
@@ -105,7 +108,8 @@ pub const FOLLOWED_BATCH: usize = 32;
 /// In a launch linked directly, how long a process keeps a report for the launcher at most
 /// (sent when the process next looks: at once while it runs, within 100 ms when it waits
 /// on a process that is gone), so that the launcher's view of a run that stalls catches up
-/// with the processes'.
+/// with the processes'. A process also sends what it holds before a tick that may be long,
+/// and before it waits for the horizon.
 pub const FOLLOWED_MAX_AGE: std::time::Duration = std::time::Duration::from_millis(50);
 
 /// The most reports of other processes' ticks one process (or the launcher) keeps ahead of

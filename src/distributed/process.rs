@@ -337,9 +337,9 @@ fn report(
 /// ([`lockstep::subscribe_relayed`]), and, in a launch linked directly (`direct`), as each
 /// process of `spec` sends them ([`lockstep::subscribe_reports`]). Linked directly, the
 /// launcher hands on nothing during the run, but at its end it hands on the last reports it
-/// took ([`crate::launcher`]'s relay), in case a process went before its own reached this
-/// one; a report that comes both ways counts once ([`lockstep::TickInbox::accept`]). Kept
-/// alive for the run.
+/// took ([`crate::launcher`]'s relay), for the rare one that reached it and not this
+/// process (its sender went between its two puts); a report that comes both ways counts
+/// once ([`lockstep::TickInbox::accept`]). Kept alive for the run.
 fn declare_lockstep(
     session: &zenoh::Session,
     (keys, spec, direct): (&Keys, &GraphSpec, bool),

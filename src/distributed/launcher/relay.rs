@@ -16,9 +16,10 @@
 //! hears every other's reports itself, over their own link: the launcher follows them as
 //! here, from the batches each process sends it ([`crate::Keys::progress`],
 //! [`crate::lockstep::FOLLOWED_BATCH`]), but hands nothing on during the run
-//! ([`Course::relays`]); at its end it hands each
-//! process the last [`MAX_RELAYED`] it took, in case a process went before its last
-//! reports reached the others (a process ignores those it has). The messages go
+//! ([`Course::relays`]); at its end it hands each process the last [`MAX_RELAYED`] it took,
+//! for the rare report that reached it and not another process (a process that went
+//! between its two puts; a process ignores those it has). A report that reached the
+//! others and not the launcher is not counted in the run's events, so nobody waits for it. The messages go
 //! out through the launcher's outbox ([`super::outbox`]: from its own thread, as Zenoh's
 //! one thread must not wait to send, or when small and nothing is queued, at once), after
 //! any sample handed in before them; a process's report also tells its outbox that it
@@ -131,6 +132,8 @@ struct Course {
     /// counts as had once taken, and those are handed on at the end.
     relays: bool,
     counts: Counts,
+    /// Reports accepted so far, in turn or ahead of it.
+    accepted: u64,
     end: Option<RunEnd>,
 }
 
@@ -196,6 +199,25 @@ impl DrivePolicy<Event, Follower> for Follow<'_> {
 }
 
 impl Course {
+    /// Take in a process's message of reports `ms` (each kept until its turn, counted in
+    /// [`Course::accepted`]); too many ahead of their turn fail the next event.
+    fn take_in(&mut self, ms: Vec<Ticked>, spec: &GraphSpec) {
+        for m in ms {
+            if let Err(e) = self.inbox.accept(m, spec) {
+                self.fail_next(spec, e.to_string());
+                break;
+            }
+            self.accepted += 1;
+        }
+    }
+
+    /// `at`, or the latest run time of a report kept ahead of its turn when later: where a
+    /// run the launcher ends early ends, linked directly (the processes may have run on
+    /// reports the launcher never had, or lacks yet).
+    fn reached(&self, at: Nanos) -> Nanos {
+        self.inbox.newest_ns().map_or(at, |n| Nanos(n).max(at))
+    }
+
     /// Take every report whose turn has come, in the run's order, drawing each next event
     /// (the drive loop, [`Follow`] its event source); the end where one says so (a stop, a
     /// failure, a process out of step) or where the run's duration is reached.
@@ -391,6 +413,7 @@ impl Relay {
                 published: vec![None; self.spec.topics.len()],
                 ..Counts::default()
             },
+            accepted: 0,
             end: None,
         };
         course.advance(&self.spec);
@@ -415,12 +438,7 @@ impl Relay {
             if c.end.is_some() {
                 return;
             }
-            for m in ms {
-                if let Err(e) = c.inbox.accept(m, &self.spec) {
-                    c.fail_next(&self.spec, e.to_string());
-                    break;
-                }
-            }
+            c.take_in(ms, &self.spec);
             c.advance(&self.spec);
             let low = match (c.horizon, c.cursor.next()) {
                 (Some(h), Some(e)) => e.node_at().1 .0.saturating_add(c.lookahead / 2) > h,
@@ -449,14 +467,17 @@ impl Relay {
         self.direct
     }
 
-    /// The latest run time a process reported an event at, among the reports kept ahead of
-    /// their turn. Linked directly, a process that is gone may have sent the others
-    /// reports it never sent the launcher, and they ran on to here.
-    pub(super) fn newest_reported(&self) -> Option<Nanos> {
-        lock(&self.course)
-            .as_ref()
-            .and_then(|c| c.inbox.newest_ns())
-            .map(Nanos)
+    /// How many reports the launcher has taken in so far (in turn or ahead of it): it
+    /// stands still once no process sends more.
+    pub(super) fn accepted(&self) -> u64 {
+        lock(&self.course).as_ref().map_or(0, |c| c.accepted)
+    }
+
+    /// `at`, or later when the processes reported events past it (linked directly, they may
+    /// run on reports the launcher never had, or lacks yet): where a run the launcher ends
+    /// early ends.
+    pub(super) fn at_least_reported(&self, at: Nanos) -> Nanos {
+        lock(&self.course).as_ref().map_or(at, |c| c.reached(at))
     }
 
     /// Where the run is.
@@ -496,7 +517,8 @@ impl Relay {
     pub(super) fn interrupt(&self) -> RunEnd {
         match lock(&self.course).as_mut() {
             Some(c) => {
-                let at = c.order.now();
+                // Linked directly, a process may have run past the launcher's view.
+                let at = c.reached(c.order.now());
                 c.end
                     .get_or_insert(RunEnd {
                         at,
@@ -671,6 +693,7 @@ mod tests {
                 published: vec![None; cfg.graph.topics.len()],
                 ..Counts::default()
             },
+            accepted: 0,
             end: None,
         };
         (course, events, cfg)
@@ -685,6 +708,46 @@ mod tests {
             publish: matches!(event, Event::Publish { .. }),
             ..report("", index, i)
         }
+    }
+
+    /// Linked directly, a process gone with reports only the others had leaves the
+    /// launcher's view at its first missing event, while the others' reports past it come
+    /// in ahead of their turn: the launcher counts them coming (it ends the run once they
+    /// stop) and ends it where the furthest got, not where its view stopped.
+    #[test]
+    fn a_run_ended_early_ends_where_the_furthest_report_says() {
+        let (mut c, events, cfg) = following(100);
+        let spec = &cfg.graph;
+        // The policy's first event's report never comes; everything of the robot's does.
+        let lost = (events.iter())
+            .position(|e| spec.process_of(NodeId(e.node_at().0)) == "policy")
+            .unwrap();
+        let robots: Vec<Ticked> = (events.iter().enumerate())
+            .filter(|(_, e)| spec.process_of(NodeId(e.node_at().0)) == "robot")
+            .map(|(k, e)| report_of(spec, k as u64, *e))
+            .collect();
+        let newest = robots.iter().map(|m| m.t_ns).max().unwrap();
+        let before = robots.iter().filter(|m| m.index < lost as u64).count();
+        c.take_in(robots.clone(), spec);
+        c.advance(spec);
+        assert_eq!(
+            c.cursor.index(),
+            lost as u64,
+            "the view stops at the lost report"
+        );
+        assert_eq!(
+            c.accepted,
+            robots.len() as u64,
+            "every report counted coming"
+        );
+        let view = events[lost].node_at().1;
+        assert!(Nanos(newest) > view);
+        assert_eq!(c.reached(view), Nanos(newest));
+        // In step (nothing kept ahead), the view is where the run is.
+        let (mut d, _, _) = following(100);
+        d.take_in(robots[..before].to_vec(), spec);
+        d.advance(spec);
+        assert_eq!(d.reached(view), view);
     }
 
     #[test]

@@ -148,13 +148,14 @@ impl Launch<'_> {
                 .find(|p| self.names.contains(p))
                 .cloned();
             // Linked directly, the launcher hears the others' reports in batches: it ends
-            // the run once they stop coming, at the first event nobody ran.
+            // the run once they stop coming, where the furthest process got.
             let settled = !relay.follows_in_batches()
                 || gone.is_some() && {
-                    let (index, changed, since) =
-                        settling.get_or_insert((now.index, Instant::now(), Instant::now()));
-                    if *index != now.index {
-                        (*index, *changed) = (now.index, Instant::now());
+                    let accepted = relay.accepted();
+                    let (seen, changed, since) =
+                        settling.get_or_insert((accepted, Instant::now(), Instant::now()));
+                    if *seen != accepted {
+                        (*seen, *changed) = (accepted, Instant::now());
                     }
                     changed.elapsed() >= FOLLOWED_SETTLE || since.elapsed() >= FOLLOWED_SETTLE_MAX
                 };
@@ -168,7 +169,7 @@ impl Launch<'_> {
                 // Linked directly, the others may have run on past the launcher's view, on
                 // reports of the gone process's that only they had: the run ends where the
                 // furthest of them got.
-                let at = relay.newest_reported().map_or(t, |n| n.max(t));
+                let at = relay.at_least_reported(t);
                 return Ok(relay.finish(failed(spec, node, at, message)));
             }
             if now.index != seen || beyond {
@@ -180,7 +181,8 @@ impl Launch<'_> {
                     "process '{process}' did not answer within {} s",
                     patience.as_secs()
                 );
-                return Ok(relay.finish(failed(spec, i, t, message)));
+                let at = relay.at_least_reported(t);
+                return Ok(relay.finish(failed(spec, i, at, message)));
             }
             crossbeam_channel::select! {
                 recv(nudged) -> _ => {},
@@ -204,11 +206,11 @@ impl Launch<'_> {
     }
 }
 
-/// Linked directly, once a process is gone: how long the launcher's view of the run must
-/// stand still (no batch of reports moving it, [`crate::lockstep::FOLLOWED_BATCH`]) before
-/// the run ends there, and how long it waits for that at most. A process sends what it has
-/// kept within [`crate::lockstep::FOLLOWED_MAX_AGE`] of making it, once its main thread
-/// looks again (every 100 ms when nothing comes).
+/// Linked directly, once a process is gone: how long no report may come in (from any
+/// process, in turn or ahead of it, [`Relay::accepted`]) before the run ends, and how long
+/// the launcher waits for that at most. A stalled process sends what it has kept
+/// ([`crate::lockstep::FOLLOWED_BATCH`]) within [`crate::lockstep::FOLLOWED_MAX_AGE`] of
+/// making it, once its main thread looks again (every 100 ms when nothing comes).
 const FOLLOWED_SETTLE: Duration = Duration::from_millis(300);
 const FOLLOWED_SETTLE_MAX: Duration = Duration::from_secs(2);
 

@@ -48,7 +48,9 @@ const CALLBACK_TICK_NS: u64 = 2_000_000;
 const MAX_FAILED_BYTES: usize = wire::MAX_TICK_BYTES - 512;
 
 /// The longest a report waits for the next one to go with it: past this it goes alone, so
-/// slow ticks in a row report as they end, as the launcher's patience counts per report.
+/// slow ticks in a row report as they end, as the launcher's patience counts per report (in
+/// a launch linked directly, per batch: a tick that may be long sends the launcher what it
+/// holds first, `Advance::take`).
 const MAX_REPORT_WAIT: Duration = Duration::from_millis(10);
 
 /// What one process's lockstep shares between Zenoh's callbacks and its main thread: the
@@ -290,8 +292,9 @@ impl FollowedBatch {
 
 impl Stepper {
     /// The run of `core`'s graph (the whole graph's, this process's built) as `share` sets
-    /// it up, its reports sent on `publisher`; it runs nothing before the first horizon.
-    /// With `callback_ticks` false every event of this process runs on its main thread.
+    /// it up, its reports sent as `reporting` says; it runs nothing before the first
+    /// horizon. With [`Reporting::callback_ticks`] false every event of this process runs
+    /// on its main thread.
     pub(super) fn new(
         core: RunCore,
         share: Arc<Share>,
@@ -460,8 +463,7 @@ impl<'c> DrivePolicy<Event, Events<'c>> for Advance<'_> {
         }
         if t.local.contains(&i) && !self.on_main {
             let start = matches!(event, Event::Start { .. });
-            let long = t.tick_ns[i].is_none_or(|ns| ns > CALLBACK_TICK_NS);
-            if !t.callback_ticks || (start && long) {
+            if !t.callback_ticks || (start && t.tick_may_be_long(i)) {
                 self.to_main = true;
                 return Ok(Turn::Wait);
             }
@@ -478,6 +480,15 @@ impl<'c> DrivePolicy<Event, Events<'c>> for Advance<'_> {
         let (i, _) = event.node_at();
         let t = &mut *self.turns;
         if t.local.contains(&i) {
+            // A tick that may be long: whatever the launcher has not yet been sent goes
+            // first, so that its view of the run is not held back while the tick runs (the
+            // others have those reports and wait here). After the samples held back.
+            let start = matches!(event, Event::Start { .. });
+            let long = !t.callback_ticks || t.tick_may_be_long(i);
+            if start && long && t.share.bridge.spill.is_empty() {
+                t.flush()?;
+                t.send_followed(true)?;
+            }
             return Ok(match t.run_here(core, index, event)? {
                 Some(over) => Taken::Ran { over, ticked: 0 },
                 None => Taken::NotYet, // an input message is still on its way
@@ -520,6 +531,12 @@ impl<'c> DrivePolicy<Event, Events<'c>> for Advance<'_> {
 }
 
 impl Turns {
+    /// Node `i`'s next tick may be long: it has not ticked here yet, or its last tick took
+    /// over [`CALLBACK_TICK_NS`].
+    fn tick_may_be_long(&self, i: usize) -> bool {
+        self.tick_ns[i].is_none_or(|ns| ns > CALLBACK_TICK_NS)
+    }
+
     /// Run `event`, this process's, the run's `index`-th, on `core` and keep its report:
     /// `Some(over)` (the node stopped the run or failed), or `None` while an input message
     /// it must see is still on its way (a start sees exactly the messages it would see in
@@ -642,8 +659,8 @@ impl Turns {
 /// Run this process's part of the virtual clock's run: set up `core` in `slot` (whose
 /// callbacks advance it as reports and samples arrive), go on where a callback stopped
 /// (`nudged`), move the horizon on as the launcher's messages on `ctl` say, and at its stop
-/// wait for the last messages sent here and return the figures. `callback_ticks`: its
-/// ticks may run in Zenoh's callbacks ([`Stepper::new`]).
+/// wait for the last messages sent here and return the figures. Its reports go as
+/// `reporting` says (and its ticks may run in Zenoh's callbacks, [`Stepper::new`]).
 ///
 /// # Errors
 /// [`DistError::Peer`] when the run cannot go on here (another process out of step, an
