@@ -346,23 +346,27 @@ fn declare_lockstep(
     process: &str,
     slot: &stepper::SharedSlot,
 ) -> Result<Vec<zenoh::pubsub::Subscriber<()>>, DistError> {
+    let take = || {
+        let slot = slot.clone();
+        move |ms| slot.reports(ms)
+    };
     let mut subs = Vec::new();
     let mut ticked = Vec::new();
     for source in report_sources(spec, direct, process) {
-        let slot = slot.clone();
-        let take = move |ms| slot.reports(ms);
         match source {
             ReportSource::Relayed => {
-                subs.push(lockstep::subscribe_relayed(session, keys, process, take)?)
+                subs.push(lockstep::subscribe_relayed(session, keys, process, take())?)
             }
             ReportSource::Ticked(p) => ticked.push(p),
         }
     }
     if !ticked.is_empty() {
-        let slot = slot.clone();
-        let take = move |ms| slot.reports(ms);
         subs.extend(lockstep::subscribe_reports(
-            session, keys, &ticked, None, take,
+            session,
+            keys,
+            &ticked,
+            None,
+            take(),
         )?);
     }
     Ok(subs)
