@@ -36,7 +36,9 @@
 //! In a launch linked directly ([`crate::open_linked_peer`]) the processes are linked to each
 //! other, and a process's message of reports goes to every other process
 //! ([`subscribe_reports`]): between two events of different processes there is one message
-//! over their own link. The launcher hears the same reports in batches
+//! over their own link; between two processes the reports of ticks that published a
+//! crossing sample ride on the last such sample instead ([`reports_ride_on_samples`]), so a
+//! hop is one message. The launcher hears the same reports in batches
 //! ([`subscribe_progress`], [`FOLLOWED_BATCH`]: always before a process waits for the
 //! horizon), follows them as above, and moves the horizon, but hands nothing on until the
 //! end.
@@ -111,6 +113,27 @@ pub const FOLLOWED_BATCH: usize = 32;
 /// with the processes'. A process also sends what it holds before a tick that may be long,
 /// and before it waits for the horizon.
 pub const FOLLOWED_MAX_AGE: std::time::Duration = std::time::Duration::from_millis(50);
+
+/// Whether a process's tick reports ride on its samples in a run of `spec` under the
+/// virtual clock (`direct`: linked directly): the reports of the ticks that published
+/// samples crossing to another process go as the last such sample's attachment, not on
+/// their own key ([`Keys::ticked`]), so a hop costs one message where a sample and its report
+/// made two. Only where the one process that reads a sample is every process that needs the
+/// reports: a launch of two processes linked directly (in a star the launcher hands the
+/// reports on; with three or more, a sample reaches one process of several). A process
+/// reading a topic takes the reports its sample carries only from the process that
+/// publishes the topic ([`decode_carried`]; the access rules let no other put on its key).
+pub fn reports_ride_on_samples(spec: &GraphSpec, direct: bool) -> bool {
+    direct && spec.placement().len() == 2
+}
+
+/// The tick reports a sample carries ([`reports_ride_on_samples`]), as its attachment
+/// `bytes` says, from process `from`, the process that publishes the sample's topic: `None`
+/// for bytes that are not a message of reports, or one with a report of another process's.
+pub fn decode_carried(bytes: &[u8], from: &str) -> Option<Vec<Ticked>> {
+    let ms = wire::decode_reports(bytes).ok()?;
+    ms.iter().all(|m| m.process == from).then_some(ms)
+}
 
 /// The most reports of other processes' ticks one process (or the launcher) keeps ahead of
 /// their turn (each process runs at most to the horizon, so a run holds at most the other
@@ -342,6 +365,35 @@ pub(crate) mod tests {
             publish: false,
             compute_ns: 0,
         }
+    }
+
+    /// The reports ride on the samples only between two processes linked directly, and a
+    /// process takes the reports a sample carries only when every one is its publisher's.
+    #[test]
+    fn reports_ride_on_samples_only_between_two_processes_linked_directly() {
+        use ratelab_runtime::graph::synthetic::graph_toml;
+        let chapter = GraphSpec::chapter();
+        assert_eq!(chapter.placement().len(), 2);
+        assert!(reports_ride_on_samples(&chapter, true));
+        assert!(!reports_ride_on_samples(&chapter, false), "a star");
+        let three = GraphSpec::parse(&graph_toml(12, 3), "three").unwrap();
+        assert_eq!(three.placement().len(), 3);
+        assert!(!reports_ride_on_samples(&three, true));
+        let bytes = wire::encode_reports(&[report("robot", 0, 0), report("robot", 1, 2)]);
+        let carried = decode_carried(&bytes, "robot").expect("the publisher's reports");
+        assert_eq!(carried.len(), 2);
+        assert_eq!(
+            decode_carried(&bytes, "policy"),
+            None,
+            "not the publisher's"
+        );
+        let mixed = wire::encode_reports(&[report("robot", 0, 0), report("policy", 1, 1)]);
+        assert_eq!(
+            decode_carried(&mixed, "robot"),
+            None,
+            "one not the publisher's"
+        );
+        assert_eq!(decode_carried(b"not reports", "robot"), None);
     }
 
     /// The launcher, linked directly, ends a run whose process is gone where the furthest

@@ -172,7 +172,10 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         }
         None => None,
     };
-    let bridge = bridge_outbound(&spec, &handles, publishers); // and its pool, before the run
+    // Two processes linked directly under the virtual clock: the reports ride on the
+    // samples.
+    let carry = virtual_clock && lockstep::reports_ride_on_samples(&spec, setup.direct);
+    let bridge = bridge_outbound(&spec, &handles, publishers, carry); // and its pool, before the run
     send(&ToLauncher::Ready {
         process: opts.process.clone(),
     })?;
@@ -823,6 +826,76 @@ mod tests {
         outlet.send(509, Nanos(100), None, &force(0.0));
         got(509);
         assert!(spill.is_empty());
+    }
+
+    #[test]
+    fn two_processes_linked_directly_send_a_ticks_reports_on_its_last_sample() {
+        // A session of its own, on no network, as above.
+        let mut config = zenoh::Config::default();
+        for (key, value) in [
+            ("listen/endpoints", "[]"),
+            ("connect/endpoints", "[]"),
+            ("scouting/multicast/enabled", "false"),
+        ] {
+            config.insert_json5(key, value).expect("a Zenoh setting");
+        }
+        let session = zenoh::open(config).wait().expect("a local session");
+        let (tx, rx) = crossbeam_channel::unbounded();
+        let _sub = session
+            .declare_subscriber("t/action")
+            .callback(move |s| {
+                let sample = WireSample::decode(&s.payload().to_bytes()).expect("a sample");
+                let carried = s.attachment().map(|a| a.to_bytes().to_vec());
+                let _ = tx.send((sample.head.seq, carried));
+            })
+            .wait()
+            .expect("a subscriber");
+        let publisher = session.declare_publisher("t/action").wait().unwrap();
+        let spill = Spill::carrying();
+        let bridge = super::Bridge {
+            outlets: vec![Some(Outlet::new(
+                publisher,
+                0,
+                "/action",
+                (spill.clone(), SharedPool::new(false)),
+            ))],
+            by_node: vec![vec![ratelab_runtime::graph::TopicId(0)], vec![]],
+            spill: spill.clone(),
+        };
+        let outlet = bridge.outlets[0].as_ref().unwrap();
+        let force = MsgData::new(ForceMsg { newtons: 0.5 });
+        let got = || {
+            rx.recv_timeout(std::time::Duration::from_secs(10))
+                .expect("a sample")
+        };
+        // Nothing kept: the reports are given back, to go on their own key.
+        assert_eq!(bridge.put_carried(vec![7]).unwrap(), Some(vec![7]));
+        // Two samples published: kept until their reports go, then both in order, the
+        // last carrying the reports.
+        outlet.send(0, Nanos(20), None, &force);
+        outlet.send(1, Nanos(40), None, &force);
+        assert!(rx.try_recv().is_err(), "kept for the reports");
+        assert!(spill.is_empty(), "kept, not held back");
+        assert_eq!(bridge.put_carried(vec![1, 2, 3]).unwrap(), None);
+        assert_eq!(got(), (0, None));
+        assert_eq!(got(), (1, Some(vec![1, 2, 3])));
+        // A sample held back past the budget goes after those kept before it, in order,
+        // with no reports: they go on their own key, once the main thread has put them.
+        outlet.send(2, Nanos(60), None, &force);
+        spill.set_budget(Some(0));
+        outlet.send(3, Nanos(80), None, &force);
+        spill.set_budget(None);
+        assert_eq!(bridge.put_carried(vec![9]).unwrap(), Some(vec![9]));
+        bridge.put_held().unwrap();
+        assert_eq!(got(), (2, None));
+        assert_eq!(got(), (3, None));
+        assert!(rx.try_recv().is_err());
+        // Not carrying (the real clock, a star, three processes): each goes as published.
+        let plain = Spill::unbounded();
+        assert_eq!(
+            plain.admitted(0, vec![5u8].into()).map(|b| b.len()),
+            Some(1)
+        );
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! The topics that cross a process's boundary, its bridge to the others: which topics cross
 //! ([`crossings`]), the sending end of each outbound one (an [`Outlet`], each message put
 //! on the wire as it is published, within the publishing tick; samples a lockstep advance
-//! holds back, [`Spill`]), and the receiving end of each inbound one (its subscription, the
+//! holds back, or keeps to carry its reports, [`Spill`]), and the receiving end of each inbound one (its subscription, the
 //! arrivals the lockstep waits for, its over-the-wire latency, the samples refused).
 //!
 //! A large sample (an image, a scan) goes through the process's shared memory
@@ -16,7 +16,9 @@ use zenoh::bytes::ZBytes;
 /// One crossing topic's sending end in its publisher's process: the bridge element that
 /// puts each message on the wire as it is published, from the topic's tap, under the topic's
 /// lock and within the publishing tick (as ROS 2's `publish()` hands a message to its
-/// middleware before it returns): a tick's measured time includes its sends.
+/// middleware before it returns): a tick's measured time includes its sends. Under the
+/// virtual clock between two processes linked directly a sample is kept until its tick's
+/// reports go, which it carries ([`Spill::carrying`]).
 pub(super) struct Outlet {
     pub(super) publisher: zenoh::pubsub::Publisher<'static>,
     /// The topic's index in the graph.
@@ -110,7 +112,9 @@ impl Outlet {
         if self.spill.admit(len) {
             // Under congestion control `Block` a put fails only when the session is closed,
             // which the run notices on its own.
-            let _ = self.publisher.put(bytes).wait();
+            if let Some(bytes) = self.spill.admitted(self.topic, bytes) {
+                let _ = self.publisher.put(bytes).wait();
+            }
         } else {
             self.spill.hold(self.topic, bytes);
         }
@@ -124,20 +128,43 @@ impl Outlet {
     }
 }
 
-/// The samples held back from the wire by the current lockstep advance, and its budget.
+/// The samples held back from the wire by the current lockstep advance, and its budget;
+/// and, when the reports ride on the samples ([`Spill::carrying`]), the samples kept to
+/// carry them.
 pub(super) struct Spill {
     /// Bytes the current advance may still put itself (`i64::MAX`: no bound).
     pub(super) left: std::sync::atomic::AtomicI64,
     /// Samples held back, in publish order: (topic index, encoded sample).
     pub(super) held: Mutex<std::collections::VecDeque<(usize, ZBytes)>>,
+    /// The reports ride on the samples ([`Spill::carrying`]).
+    carries: bool,
+    /// Samples admitted to the wire and kept, in publish order, until the reports of the
+    /// ticks that published them go: the last one put carries them ([`Bridge::put_carried`]).
+    carried: Mutex<Vec<(usize, ZBytes)>>,
 }
 
 impl Spill {
     /// No bound: every sample is put as it is published (the real clock; the main thread).
     pub(super) fn unbounded() -> Arc<Spill> {
+        Self::new(false)
+    }
+
+    /// As [`Spill::unbounded`], and the samples admitted are kept until the reports of
+    /// their ticks go, which the last of them then carries ([`Bridge::put_carried`]): a
+    /// launch of two processes linked directly under the virtual clock, where the one other
+    /// process both reads every crossing sample and needs every report
+    /// ([`crate::lockstep::reports_ride_on_samples`]). A hop then costs one message, where a
+    /// sample and its report made two.
+    pub(super) fn carrying() -> Arc<Spill> {
+        Self::new(true)
+    }
+
+    fn new(carries: bool) -> Arc<Spill> {
         Arc::new(Spill {
             left: std::sync::atomic::AtomicI64::new(i64::MAX),
             held: Mutex::default(),
+            carries,
+            carried: Mutex::default(),
         })
     }
 
@@ -154,8 +181,25 @@ impl Spill {
         self.is_empty() && self.left.fetch_sub(len, Ordering::SeqCst) >= len
     }
 
+    /// Hold `bytes`, a sample of topic `topic`, back from the wire, after any kept to carry
+    /// reports (which are held back first: order is kept).
     pub(super) fn hold(&self, topic: usize, bytes: ZBytes) {
-        ratelab_runtime::graph::lock(&self.held).push_back((topic, bytes));
+        let mut held = ratelab_runtime::graph::lock(&self.held);
+        if self.carries {
+            held.extend(ratelab_runtime::graph::lock(&self.carried).drain(..));
+        }
+        held.push_back((topic, bytes));
+    }
+
+    /// Send `bytes`, a sample of topic `topic` admitted to the wire ([`Spill::admit`]): kept
+    /// to carry reports when the reports ride on the samples (`None` back), else given back
+    /// to be put now.
+    pub(super) fn admitted(&self, topic: usize, bytes: ZBytes) -> Option<ZBytes> {
+        if !self.carries {
+            return Some(bytes);
+        }
+        ratelab_runtime::graph::lock(&self.carried).push((topic, bytes));
+        None
     }
 
     /// No sample is held back.
@@ -184,6 +228,35 @@ impl Bridge {
             .iter()
             .filter_map(|t| Some((t.0, self.outlets[t.0].as_ref()?.tick_ended()?)))
             .collect()
+    }
+
+    /// Put the samples kept to carry reports ([`Spill::carrying`]), in order, the last with
+    /// `reports` (an encoded message of tick reports, [`wire::encode_reports`]) as its
+    /// attachment: `Some(reports)` back when no sample was kept, for the reports to go on
+    /// their own key.
+    ///
+    /// # Errors
+    /// When the session is closed.
+    pub(super) fn put_carried(&self, reports: Vec<u8>) -> zenoh::Result<Option<Vec<u8>>> {
+        if !self.spill.carries {
+            return Ok(Some(reports));
+        }
+        let carried = std::mem::take(&mut *ratelab_runtime::graph::lock(&self.spill.carried));
+        let Some(last) = carried.len().checked_sub(1) else {
+            return Ok(Some(reports));
+        };
+        let mut reports = Some(reports);
+        for (k, (t, bytes)) in carried.into_iter().enumerate() {
+            let Some(o) = self.outlets.get(t).and_then(Option::as_ref) else {
+                continue;
+            };
+            let put = o.publisher.put(bytes);
+            match k == last {
+                true => put.attachment(reports.take()).wait()?,
+                false => put.wait()?,
+            }
+        }
+        Ok(reports)
     }
 
     /// Put the samples held back on the wire, oldest first (from the main thread).
@@ -363,10 +436,24 @@ pub(super) fn subscribe_inbound(
         let refusals = refusals.clone();
         let process = process.to_string();
         let slot = slot.clone();
+        let publisher = spec.process_of(spec.topic(t).publisher);
         subscribers.push(
             session
                 .declare_subscriber(keys.topic(&spec.topic(t).name))
                 .callback(move |s| {
+                    // The reports the sample carries, if any (two processes linked
+                    // directly, `lockstep::reports_ride_on_samples`): taken in whatever
+                    // becomes of the sample, as the run cannot go on without them.
+                    let carried = (slot.as_ref()).zip(s.attachment()).map(|(slot, a)| {
+                        match lockstep::decode_carried(&a.to_bytes(), &publisher) {
+                            Some(ms) => slot.take_in(ms),
+                            None => {
+                                let why = "reports that are not its publisher's";
+                                refusals.note(&process, topic.name(), why);
+                                false
+                            }
+                        }
+                    });
                     // Read in place: from the shared buffer itself when it came through
                     // shared memory (its pixels then a view of it), else from Zenoh's bytes.
                     let read = read_arrived(s.payload(), |sample, shared| -> Result<_, String> {
@@ -379,7 +466,13 @@ pub(super) fn subscribe_inbound(
                     });
                     let (seq, sent, in_place, drawn) = match read {
                         Ok(read) => read,
-                        Err(e) => return refusals.note(&process, topic.name(), &e),
+                        Err(e) => {
+                            refusals.note(&process, topic.name(), &e);
+                            if let (Some(slot), Some(true)) = (&slot, carried) {
+                                slot.wake(false);
+                            }
+                            return;
+                        }
                     };
                     let took = wire::mono_now_ns().saturating_sub(sent);
                     let mut got = ratelab_runtime::graph::lock(&lat[i]);
@@ -419,15 +512,20 @@ pub(super) struct Inbound {
 /// Make each crossing topic whose publisher runs here a bridge element (`publishers`: the
 /// topic and its key's publisher): its tap sends each message as it is published. Called
 /// before the process says it is ready: the shared-memory pool of a topic whose messages
-/// may be large is made here ([`SharedPool::make_now`]). Returns
+/// may be large is made here ([`SharedPool::make_now`]). With `carry`, the samples are kept
+/// to carry their ticks' reports ([`Spill::carrying`]). Returns
 /// the bridge, which says after a local node's event what it published across the
 /// boundary and the newest seq sent on each.
 pub(super) fn bridge_outbound(
     spec: &GraphSpec,
     handles: &ratelab_runtime::graph::GraphHandles,
     publishers: Vec<(TopicId, zenoh::pubsub::Publisher<'static>)>,
+    carry: bool,
 ) -> Arc<Bridge> {
-    let spill = Spill::unbounded();
+    let spill = match carry {
+        true => Spill::carrying(),
+        false => Spill::unbounded(),
+    };
     let pool = SharedPool::new(crate::shared_memory().unwrap_or(false));
     // A message with a field of bytes (an image's pixels) may be large: its pool is made
     // now, before the run, not at its first frame. No other process pays for a pool it may

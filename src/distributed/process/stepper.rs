@@ -13,7 +13,8 @@
 //! message a tick waits for runs the tick, publishes its samples and sends its report. And
 //! a process sends the reports of its consecutive events together, in one message, when it
 //! must next wait ([`wire::encode_reports`]): the chapter's graph split in two costs one
-//! sample and one report message a hop.
+//! sample and one report message a hop in a star, and, linked directly, one sample that
+//! carries its tick's reports ([`crate::lockstep::reports_ride_on_samples`]).
 
 use super::stats::{held_topics, read_counters};
 use super::Share;
@@ -95,16 +96,22 @@ impl Slot {
     /// Take in other processes' reports (decoded, from their keys), then advance (on
     /// Zenoh's receive thread).
     pub(super) fn reports(&self, ms: Vec<Ticked>) {
-        {
-            let mut inbox = ratelab_runtime::graph::lock(&self.inbox);
-            for m in ms {
-                if let Err(e) = inbox.accept(m, &self.spec) {
-                    ratelab_runtime::graph::lock(&self.error).get_or_insert(e);
-                    return;
-                }
+        if self.take_in(ms) {
+            self.wake(false);
+        }
+    }
+
+    /// Take in other processes' reports without advancing: `false` when one is refused
+    /// (the run cannot go on here: the error is kept for the main thread).
+    pub(super) fn take_in(&self, ms: Vec<Ticked>) -> bool {
+        let mut inbox = ratelab_runtime::graph::lock(&self.inbox);
+        for m in ms {
+            if let Err(e) = inbox.accept(m, &self.spec) {
+                ratelab_runtime::graph::lock(&self.error).get_or_insert(e);
+                return false;
             }
         }
-        self.wake(false);
+        true
     }
 
     /// Advance the run as far as what has come in lets it (nothing before it is set up, or
@@ -622,14 +629,17 @@ impl Turns {
         Ok(Some(over))
     }
 
-    /// Send the reports kept, in one message.
+    /// Send the reports kept, in one message: on the last sample their ticks published when
+    /// the reports ride on the samples ([`super::Spill::carrying`]), else on their own key.
     fn flush(&mut self) -> Result<(), DistError> {
         if self.outbox.is_empty() {
             return Ok(());
         }
         let bytes = wire::encode_reports(&self.outbox);
         self.kept_at = None;
-        self.publisher.put(bytes).wait()?;
+        if let Some(bytes) = self.share.bridge.put_carried(bytes)? {
+            self.publisher.put(bytes).wait()?;
+        }
         match self.followed.as_mut() {
             Some(f) => {
                 f.batch.keep(&mut self.outbox);
