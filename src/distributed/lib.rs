@@ -406,7 +406,8 @@ impl Keys {
     /// Virtual clock, a launch linked directly: where process `p` sends the launcher its
     /// tick reports to follow, in batches ([`wire::Ticked`], up to
     /// [`lockstep::FOLLOWED_BATCH`] to a message, and always before it waits for the
-    /// horizon), while the other processes hear each report on [`Keys::ticked`].
+    /// horizon), while the other processes hear each report on [`Keys::ticked`] (or on the
+    /// sample it published, [`lockstep::reports_ride_on_samples`]).
     pub fn progress(&self, p: &str) -> String {
         format!("{}/@progress/{p}", self.prefix)
     }

@@ -98,7 +98,8 @@ pub fn horizon_periods(order: &ratelab_runtime::runcore::Follower, paced: bool) 
 /// In a launch linked directly, the most of its own tick reports a process keeps before it
 /// sends them to the launcher to follow ([`Keys::progress`]); it sends what it has kept
 /// before it waits for the horizon, and at its run's end, whatever the count. The other
-/// processes hear every report as it is made ([`Keys::ticked`]): only the launcher's view,
+/// processes hear every report as it is made ([`Keys::ticked`], or on the sample it
+/// published, [`reports_ride_on_samples`]): only the launcher's view,
 /// which moves the horizon and counts the run, comes in batches. Following every report
 /// cost the launcher 77 µs of CPU an instant of the chapter's launch, on a machine of 2
 /// cores where the processes whose turn it was needed them (BENCHMARKS.md, issue 76 item 4).
@@ -118,7 +119,10 @@ pub const FOLLOWED_MAX_AGE: std::time::Duration = std::time::Duration::from_mill
 /// virtual clock (`direct`: linked directly): the reports of the ticks that published
 /// samples crossing to another process go as the last such sample's attachment, not on
 /// their own key ([`Keys::ticked`]), so a hop costs one message where a sample and its report
-/// made two. Only where the one process that reads a sample is every process that needs the
+/// made two. (Samples a Zenoh callback holds back past its send budget go later, from the
+/// main thread, with their reports on their own key.) Whoever may read a topic may then read
+/// the reports its samples carry: the ticks' compute times and a failure's text, which the
+/// run's summary prints anyway. Only where the one process that reads a sample is every process that needs the
 /// reports: a launch of two processes linked directly (in a star the launcher hands the
 /// reports on; with three or more, a sample reaches one process of several). A process
 /// reading a topic takes the reports its sample carries only from the process that

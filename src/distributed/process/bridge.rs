@@ -1,6 +1,7 @@
 //! The topics that cross a process's boundary, its bridge to the others: which topics cross
 //! ([`crossings`]), the sending end of each outbound one (an [`Outlet`], each message put
-//! on the wire as it is published, within the publishing tick; samples a lockstep advance
+//! on the wire as it is published, within the publishing tick, or kept until its tick's
+//! reports go; samples a lockstep advance
 //! holds back, or keeps to carry its reports, [`Spill`]), and the receiving end of each inbound one (its subscription, the
 //! arrivals the lockstep waits for, its over-the-wire latency, the samples refused).
 //!
@@ -259,6 +260,24 @@ impl Bridge {
         Ok(reports)
     }
 
+    /// Put the samples kept to carry reports ([`Spill::carrying`]) with none: what
+    /// [`Bridge::put_carried`] does when there is no report to carry.
+    ///
+    /// # Errors
+    /// When the session is closed.
+    pub(super) fn put_kept(&self) -> zenoh::Result<()> {
+        if !self.spill.carries {
+            return Ok(());
+        }
+        let kept = std::mem::take(&mut *ratelab_runtime::graph::lock(&self.spill.carried));
+        for (t, bytes) in kept {
+            if let Some(o) = self.outlets.get(t).and_then(Option::as_ref) {
+                o.publisher.put(bytes).wait()?;
+            }
+        }
+        Ok(())
+    }
+
     /// Put the samples held back on the wire, oldest first (from the main thread).
     ///
     /// # Errors
@@ -352,7 +371,11 @@ pub(super) fn wire_crossings(
         // judged in its own process, on its own copy.
         handles.topic(t).set_matched(true);
     }
-    let ends = subscribe_inbound(session, keys, spec, handles, (&inbound, slot), process)?;
+    // Two processes linked directly under the virtual clock: the reports ride on the
+    // samples both ways.
+    let carry = !real && lockstep::reports_ride_on_samples(spec, direct);
+    let into = (&inbound[..], slot, carry);
+    let ends = subscribe_inbound(session, keys, spec, handles, into, process)?;
     let congestion = match direct && real {
         true => zenoh::qos::CongestionControl::Drop,
         false => zenoh::qos::CongestionControl::Block,
@@ -402,7 +425,8 @@ pub(super) fn crossings(spec: &GraphSpec, mine: &[NodeId]) -> (Vec<TopicId>, Vec
 /// into the topic's copy here (or refused and counted, [`Refusals`]), its seq noted in the
 /// returned [`Arrivals`] and its time on the wire in the returned per-topic latencies.
 /// Under the virtual clock each arrival then advances the lockstep in `slot`, on Zenoh's
-/// receive thread ([`stepper`]).
+/// receive thread ([`stepper`]); with `carry`, after taking in the reports the sample
+/// carries ([`crate::lockstep::reports_ride_on_samples`]).
 ///
 /// # Errors
 /// [`DistError::Zenoh`] when a subscriber cannot be declared.
@@ -411,7 +435,7 @@ pub(super) fn subscribe_inbound(
     keys: &Keys,
     spec: &GraphSpec,
     handles: &ratelab_runtime::graph::GraphHandles,
-    (inbound, slot): (&[TopicId], Option<stepper::SharedSlot>),
+    (inbound, slot, carry): (&[TopicId], Option<stepper::SharedSlot>, bool),
     process: &str,
 ) -> Result<Inbound, DistError> {
     let arrivals = Arc::new(Arrivals {
@@ -444,16 +468,18 @@ pub(super) fn subscribe_inbound(
                     // The reports the sample carries, if any (two processes linked
                     // directly, `lockstep::reports_ride_on_samples`): taken in whatever
                     // becomes of the sample, as the run cannot go on without them.
-                    let carried = (slot.as_ref()).zip(s.attachment()).map(|(slot, a)| {
-                        match lockstep::decode_carried(&a.to_bytes(), &publisher) {
-                            Some(ms) => slot.take_in(ms),
-                            None => {
-                                let why = "reports that are not its publisher's";
-                                refusals.note(&process, topic.name(), why);
-                                false
-                            }
-                        }
-                    });
+                    let attached = s.attachment().filter(|_| carry);
+                    let carried =
+                        (slot.as_ref()).zip(attached).map(
+                            |(slot, a)| match lockstep::decode_carried(&a.to_bytes(), &publisher) {
+                                Some(ms) => slot.take_in(ms),
+                                None => {
+                                    let why = "reports that are not its publisher's";
+                                    refusals.note(&process, topic.name(), why);
+                                    false
+                                }
+                            },
+                        );
                     // Read in place: from the shared buffer itself when it came through
                     // shared memory (its pixels then a view of it), else from Zenoh's bytes.
                     let read = read_arrived(s.payload(), |sample, shared| -> Result<_, String> {

@@ -211,7 +211,9 @@ struct Turns {
 pub(super) struct Reporting {
     /// Every report, as it is made, to whoever follows this process's ticks
     /// ([`crate::Keys::ticked`]: in a star the launcher, which hands them on; linked
-    /// directly, the other processes).
+    /// directly, the other processes, but between two processes the reports of a tick that
+    /// published a crossing sample ride on it instead,
+    /// [`crate::lockstep::reports_ride_on_samples`]).
     pub ticked: zenoh::pubsub::Publisher<'static>,
     /// Linked directly: the launcher's copy, in batches ([`crate::Keys::progress`],
     /// [`crate::lockstep::FOLLOWED_BATCH`]).
@@ -382,7 +384,8 @@ impl Stepper {
 
     /// Run every event whose turn has come and whose inputs are here, then send the
     /// reports of this process's events among them. `on_main`: first put the samples held
-    /// back, and put every sample as it is published; else (on Zenoh's receive thread) stop
+    /// back, and put every sample as it is published (or keep it to carry its reports,
+    /// [`super::Spill::carrying`]); else (on Zenoh's receive thread) stop
     /// after an event whose samples went past [`super::CALLBACK_SEND_BUDGET`], or before a
     /// tick not known to be short ([`CALLBACK_TICK_NS`]), and return `true`: the main
     /// thread must go on (putting the held-back samples and then the reports).
@@ -633,6 +636,9 @@ impl Turns {
     /// the reports ride on the samples ([`super::Spill::carrying`]), else on their own key.
     fn flush(&mut self) -> Result<(), DistError> {
         if self.outbox.is_empty() {
+            // No report to carry: a sample kept (none is published outside an event of
+            // this process's, which always leaves its report) still goes.
+            self.share.bridge.put_kept()?;
             return Ok(());
         }
         let bytes = wire::encode_reports(&self.outbox);
