@@ -25,7 +25,10 @@
 //! topic holds only that topic's process's outbox. Under the virtual clock a small sample
 //! is put from Zenoh's thread (the outbox's direct lane, `launcher/outbox.rs`), so a
 //! frozen watcher subscribed to it holds the whole star, as it held the lockstep before,
-//! until Zenoh closes its link (5 s).
+//! until Zenoh closes its link (5 s). Between two processes linked directly a sample
+//! carries its tick's reports ([`crate::lockstep::reports_ride_on_samples`]), so whoever
+//! may read a topic reads those too (compute times, a failure's text: what the run's
+//! summary prints).
 //!
 //! A large launch is a star ([`super::open_router`]): every process and watcher links to the
 //! launcher's router alone, so the check that matters is the router's, on each message
