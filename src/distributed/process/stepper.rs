@@ -818,6 +818,88 @@ mod tests {
     use crate::wire::{self, MAX_TICKS_PER_MESSAGE};
     use std::time::{Duration, Instant};
 
+    /// Between two processes linked directly, a process takes the reports a sample carries
+    /// into its lockstep's inbox, as it arrives, only when every one is the publisher's,
+    /// and only in a launch where the reports ride on the samples; the sample arrives
+    /// either way.
+    #[test]
+    fn a_reader_takes_the_reports_a_sample_carries_from_its_publisher_alone() {
+        use super::super::bridge::subscribe_inbound;
+        use super::Slot;
+        use ratelab_runtime::config::{ClockKind, RunConfig};
+        use zenoh::Wait;
+        let cfg = RunConfig {
+            clock: ClockKind::Virtual,
+            ..RunConfig::default()
+        };
+        let spec = cfg.graph.clone();
+        let keys = crate::Keys::new(&spec.name);
+        let mine = super::super::nodes_of(&spec, "policy");
+        let batch = std::sync::Arc::default();
+        let core = super::super::build_share(&cfg, "scripted", &mine, &batch).unwrap();
+        let obs = (0..spec.topics.len())
+            .map(ratelab_runtime::graph::TopicId)
+            .find(|&t| spec.topic(t).name == "/obs")
+            .unwrap();
+        let sensor = spec.topic(obs).publisher.0;
+        // A session of its own, on no network: Zenoh hands its puts to its own subscribers.
+        let mut config = zenoh::Config::default();
+        for (key, value) in [
+            ("listen/endpoints", "[]"),
+            ("connect/endpoints", "[]"),
+            ("scouting/multicast/enabled", "false"),
+        ] {
+            config.insert_json5(key, value).unwrap();
+        }
+        let session = zenoh::open(config).wait().unwrap();
+        let publisher = session
+            .declare_publisher(keys.topic("/obs"))
+            .wait()
+            .unwrap();
+        let sample = |seq: u64| {
+            let data = spec.topic(obs).msg.from_fields(&[0.1]);
+            crate::wire::WireSample {
+                head: crate::wire::SampleHead {
+                    seq,
+                    stamp_ns: seq * 20_000_000,
+                    origin_ns: None,
+                    sent_mono_ns: crate::wire::mono_now_ns(),
+                },
+                data: data.to_bytes(),
+            }
+            .encode()
+        };
+        let within = |what: &str, done: &dyn Fn() -> bool| {
+            let until = Instant::now() + Duration::from_secs(10);
+            while !done() {
+                assert!(Instant::now() < until, "{what}");
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        };
+        for carry in [true, false] {
+            let (slot, _nudged) = Slot::shared(spec.clone());
+            let into = (&[obs][..], Some(slot.clone()), carry);
+            let inbound =
+                subscribe_inbound(&session, &keys, &spec, core.handles(), into, "policy").unwrap();
+            let arrived = |seq: u64| {
+                let seqs = ratelab_runtime::graph::lock(&inbound.arrivals.seqs);
+                super::super::bridge::arrived(&seqs, obs, seq)
+            };
+            let held = |index: u64| ratelab_runtime::graph::lock(&slot.inbox).take(index);
+            // The publisher's report, carried.
+            let theirs = wire::encode_reports(&[report("robot", 0, sensor)]);
+            publisher.put(sample(0)).attachment(theirs).wait().unwrap();
+            within("the first sample", &|| arrived(0));
+            assert_eq!(held(0).is_some(), carry, "carry {carry}");
+            // Another process's report on the publisher's sample: refused, the sample kept.
+            let forged = wire::encode_reports(&[report("policy", 1, sensor)]);
+            publisher.put(sample(1)).attachment(forged).wait().unwrap();
+            within("the second sample", &|| arrived(1));
+            assert!(held(1).is_none(), "carry {carry}");
+            drop(inbound);
+        }
+    }
+
     /// Linked directly, the launcher hears a process's reports in batches: a full batch, or
     /// any kept when the run waits for it here or the oldest has waited long enough; never
     /// an empty message. What it is sent is every report kept, in order, in messages the
