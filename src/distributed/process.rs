@@ -148,12 +148,15 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     let batch: Arc<Mutex<Batch>> = Arc::default();
     let core = build_share(&cfg, &setup.policy, &mine, &batch)?;
     let handles = core.handles().clone();
+    // Two processes linked directly under the virtual clock: the reports ride on the
+    // samples, both ways.
+    let carry = virtual_clock && lockstep::reports_ride_on_samples(&spec, setup.direct);
     let (inbound, inbound_ends, publishers) = wire_crossings(
         (&session, setup.direct, !virtual_clock),
         &keys,
         &handles,
         (&mine, &opts.process),
-        slot.clone(),
+        (slot.clone(), carry),
     )?;
     let Inbound {
         subscribers,
@@ -172,9 +175,6 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         }
         None => None,
     };
-    // Two processes linked directly under the virtual clock: the reports ride on the
-    // samples.
-    let carry = virtual_clock && lockstep::reports_ride_on_samples(&spec, setup.direct);
     let bridge = bridge_outbound(&spec, &handles, publishers, carry); // and its pool, before the run
     send(&ToLauncher::Ready {
         process: opts.process.clone(),
@@ -683,10 +683,9 @@ mod tests {
             );
         }
     }
-    #[test]
-    fn a_crossing_topic_sends_each_message_as_it_is_published_and_names_the_newest() {
-        // A session of its own, on no network: Zenoh hands a session's puts to its own
-        // subscribers.
+    /// A session of its own, on no network: Zenoh hands a session's puts to its own
+    /// subscribers (also the stepper's tests').
+    pub(super) fn local_session() -> zenoh::Session {
         let mut config = zenoh::Config::default();
         for (key, value) in [
             ("listen/endpoints", "[]"),
@@ -695,18 +694,14 @@ mod tests {
         ] {
             config.insert_json5(key, value).expect("a Zenoh setting");
         }
-        let session = zenoh::open(config).wait().expect("a local session");
-        let (tx, rx) = crossbeam_channel::unbounded();
-        let _sub = session
-            .declare_subscriber("t/action")
-            .callback(move |s| {
-                let _ = tx.send(WireSample::decode(&s.payload().to_bytes()));
-            })
-            .wait()
-            .expect("a subscriber");
+        zenoh::open(config).wait().expect("a local session")
+    }
+
+    /// A bridge of one crossing topic, `/action` (topic 0, published by node 0), put on
+    /// `session`'s key `t/action` through `spill`.
+    fn action_bridge(session: &zenoh::Session, spill: &std::sync::Arc<Spill>) -> super::Bridge {
         let publisher = session.declare_publisher("t/action").wait().unwrap();
-        let spill = Spill::unbounded();
-        let bridge = super::Bridge {
+        super::Bridge {
             outlets: vec![Some(Outlet::new(
                 publisher,
                 0,
@@ -715,7 +710,22 @@ mod tests {
             ))],
             by_node: vec![vec![ratelab_runtime::graph::TopicId(0)], vec![]],
             spill: spill.clone(),
-        };
+        }
+    }
+
+    #[test]
+    fn a_crossing_topic_sends_each_message_as_it_is_published_and_names_the_newest() {
+        let session = local_session();
+        let (tx, rx) = crossbeam_channel::unbounded();
+        let _sub = session
+            .declare_subscriber("t/action")
+            .callback(move |s| {
+                let _ = tx.send(WireSample::decode(&s.payload().to_bytes()));
+            })
+            .wait()
+            .expect("a subscriber");
+        let spill = Spill::unbounded();
+        let bridge = action_bridge(&session, &spill);
         let outlet = bridge.outlets[0].as_ref().unwrap();
         let force = |n: f64| MsgData::new(ForceMsg { newtons: n });
         let got = |seq: u64| {
@@ -830,16 +840,7 @@ mod tests {
 
     #[test]
     fn two_processes_linked_directly_send_a_ticks_reports_on_its_last_sample() {
-        // A session of its own, on no network, as above.
-        let mut config = zenoh::Config::default();
-        for (key, value) in [
-            ("listen/endpoints", "[]"),
-            ("connect/endpoints", "[]"),
-            ("scouting/multicast/enabled", "false"),
-        ] {
-            config.insert_json5(key, value).expect("a Zenoh setting");
-        }
-        let session = zenoh::open(config).wait().expect("a local session");
+        let session = local_session();
         let (tx, rx) = crossbeam_channel::unbounded();
         let _sub = session
             .declare_subscriber("t/action")
@@ -850,18 +851,8 @@ mod tests {
             })
             .wait()
             .expect("a subscriber");
-        let publisher = session.declare_publisher("t/action").wait().unwrap();
         let spill = Spill::carrying();
-        let bridge = super::Bridge {
-            outlets: vec![Some(Outlet::new(
-                publisher,
-                0,
-                "/action",
-                (spill.clone(), SharedPool::new(false)),
-            ))],
-            by_node: vec![vec![ratelab_runtime::graph::TopicId(0)], vec![]],
-            spill: spill.clone(),
-        };
+        let bridge = action_bridge(&session, &spill);
         let outlet = bridge.outlets[0].as_ref().unwrap();
         let force = MsgData::new(ForceMsg { newtons: 0.5 });
         let got = || {
@@ -869,14 +860,14 @@ mod tests {
                 .expect("a sample")
         };
         // Nothing kept: the reports are given back, to go on their own key.
-        assert_eq!(bridge.put_carried(vec![7]).unwrap(), Some(vec![7]));
+        assert_eq!(bridge.put_kept(Some(vec![7])).unwrap(), Some(vec![7]));
         // Two samples published: kept until their reports go, then both in order, the
         // last carrying the reports.
         outlet.send(0, Nanos(20), None, &force);
         outlet.send(1, Nanos(40), None, &force);
         assert!(rx.try_recv().is_err(), "kept for the reports");
         assert!(spill.is_empty(), "kept, not held back");
-        assert_eq!(bridge.put_carried(vec![1, 2, 3]).unwrap(), None);
+        assert_eq!(bridge.put_kept(Some(vec![1, 2, 3])).unwrap(), None);
         assert_eq!(got(), (0, None));
         assert_eq!(got(), (1, Some(vec![1, 2, 3])));
         // A sample held back past the budget goes after those kept before it, in order,
@@ -885,14 +876,14 @@ mod tests {
         spill.set_budget(Some(0));
         outlet.send(3, Nanos(80), None, &force);
         spill.set_budget(None);
-        assert_eq!(bridge.put_carried(vec![9]).unwrap(), Some(vec![9]));
+        assert_eq!(bridge.put_kept(Some(vec![9])).unwrap(), Some(vec![9]));
         bridge.put_held().unwrap();
         assert_eq!(got(), (2, None));
         assert_eq!(got(), (3, None));
         assert!(rx.try_recv().is_err());
         // A sample kept when there is no report to carry still goes.
         outlet.send(4, Nanos(100), None, &force);
-        bridge.put_kept().unwrap();
+        bridge.put_kept(None).unwrap();
         assert_eq!(got(), (4, None));
     }
 

@@ -140,7 +140,7 @@ pub(super) struct Spill {
     /// The reports ride on the samples ([`Spill::carrying`]).
     carries: bool,
     /// Samples admitted to the wire and kept, in publish order, until the reports of the
-    /// ticks that published them go: the last one put carries them ([`Bridge::put_carried`]).
+    /// ticks that published them go: the last one put carries them ([`Bridge::put_kept`]).
     carried: Mutex<Vec<(usize, ZBytes)>>,
 }
 
@@ -151,7 +151,7 @@ impl Spill {
     }
 
     /// As [`Spill::unbounded`], and the samples admitted are kept until the reports of
-    /// their ticks go, which the last of them then carries ([`Bridge::put_carried`]): a
+    /// their ticks go, which the last of them then carries ([`Bridge::put_kept`]): a
     /// launch of two processes linked directly under the virtual clock, where the one other
     /// process both reads every crossing sample and needs every report
     /// ([`crate::lockstep::reports_ride_on_samples`]). A hop then costs one message, where a
@@ -232,50 +232,30 @@ impl Bridge {
     }
 
     /// Put the samples kept to carry reports ([`Spill::carrying`]), in order, the last with
-    /// `reports` (an encoded message of tick reports, [`wire::encode_reports`]) as its
-    /// attachment: `Some(reports)` back when no sample was kept, for the reports to go on
-    /// their own key.
+    /// `reports` (an encoded message of tick reports, [`wire::encode_reports`]), if any, as
+    /// its attachment. Returns the reports when no sample was kept to carry them, for them to
+    /// go on their own key.
     ///
     /// # Errors
     /// When the session is closed.
-    pub(super) fn put_carried(&self, reports: Vec<u8>) -> zenoh::Result<Option<Vec<u8>>> {
+    pub(super) fn put_kept(&self, reports: Option<Vec<u8>>) -> zenoh::Result<Option<Vec<u8>>> {
         if !self.spill.carries {
-            return Ok(Some(reports));
+            return Ok(reports);
         }
-        let carried = std::mem::take(&mut *ratelab_runtime::graph::lock(&self.spill.carried));
-        let Some(last) = carried.len().checked_sub(1) else {
-            return Ok(Some(reports));
-        };
-        let mut reports = Some(reports);
-        for (k, (t, bytes)) in carried.into_iter().enumerate() {
+        let kept = std::mem::take(&mut *ratelab_runtime::graph::lock(&self.spill.carried));
+        let last = kept.len().checked_sub(1);
+        let mut reports = reports;
+        for (k, (t, bytes)) in kept.into_iter().enumerate() {
             let Some(o) = self.outlets.get(t).and_then(Option::as_ref) else {
                 continue;
             };
             let put = o.publisher.put(bytes);
-            match k == last {
+            match Some(k) == last {
                 true => put.attachment(reports.take()).wait()?,
                 false => put.wait()?,
             }
         }
         Ok(reports)
-    }
-
-    /// Put the samples kept to carry reports ([`Spill::carrying`]) with none: what
-    /// [`Bridge::put_carried`] does when there is no report to carry.
-    ///
-    /// # Errors
-    /// When the session is closed.
-    pub(super) fn put_kept(&self) -> zenoh::Result<()> {
-        if !self.spill.carries {
-            return Ok(());
-        }
-        let kept = std::mem::take(&mut *ratelab_runtime::graph::lock(&self.spill.carried));
-        for (t, bytes) in kept {
-            if let Some(o) = self.outlets.get(t).and_then(Option::as_ref) {
-                o.publisher.put(bytes).wait()?;
-            }
-        }
-        Ok(())
     }
 
     /// Put the samples held back on the wire, oldest first (from the main thread).
@@ -354,13 +334,15 @@ pub(super) type Publishers = Vec<(TopicId, zenoh::pubsub::Publisher<'static>)>;
 /// outbound publishers. Linked directly under the real clock (`real`), a publisher drops
 /// what a full link cannot take (counted lost on the wire by the subscriber), as the
 /// launcher's outbox does in a star, so that a frozen subscriber never holds up the
-/// publishing tick.
+/// publishing tick. Under the virtual clock each arrival advances the lockstep in `slot`,
+/// and with `carry` the reports a sample carries are taken in
+/// ([`crate::lockstep::reports_ride_on_samples`]).
 pub(super) fn wire_crossings(
     (session, direct, real): (&zenoh::Session, bool, bool),
     keys: &Keys,
     handles: &ratelab_runtime::graph::GraphHandles,
     (mine, process): (&[NodeId], &str),
-    slot: Option<stepper::SharedSlot>,
+    (slot, carry): (Option<stepper::SharedSlot>, bool),
 ) -> Result<(Vec<TopicId>, Inbound, Publishers), DistError> {
     let spec = &handles.spec;
     let (inbound, outbound) = crossings(spec, mine);
@@ -371,9 +353,6 @@ pub(super) fn wire_crossings(
         // judged in its own process, on its own copy.
         handles.topic(t).set_matched(true);
     }
-    // Two processes linked directly under the virtual clock: the reports ride on the
-    // samples both ways.
-    let carry = !real && lockstep::reports_ride_on_samples(spec, direct);
     let into = (&inbound[..], slot, carry);
     let ends = subscribe_inbound(session, keys, spec, handles, into, process)?;
     let congestion = match direct && real {

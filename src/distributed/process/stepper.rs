@@ -638,12 +638,12 @@ impl Turns {
         if self.outbox.is_empty() {
             // No report to carry: a sample kept (none is published outside an event of
             // this process's, which always leaves its report) still goes.
-            self.share.bridge.put_kept()?;
+            self.share.bridge.put_kept(None)?;
             return Ok(());
         }
         let bytes = wire::encode_reports(&self.outbox);
         self.kept_at = None;
-        if let Some(bytes) = self.share.bridge.put_carried(bytes)? {
+        if let Some(bytes) = self.share.bridge.put_kept(Some(bytes))? {
             self.publisher.put(bytes).wait()?;
         }
         match self.followed.as_mut() {
@@ -842,16 +842,7 @@ mod tests {
             .find(|&t| spec.topic(t).name == "/obs")
             .unwrap();
         let sensor = spec.topic(obs).publisher.0;
-        // A session of its own, on no network: Zenoh hands its puts to its own subscribers.
-        let mut config = zenoh::Config::default();
-        for (key, value) in [
-            ("listen/endpoints", "[]"),
-            ("connect/endpoints", "[]"),
-            ("scouting/multicast/enabled", "false"),
-        ] {
-            config.insert_json5(key, value).unwrap();
-        }
-        let session = zenoh::open(config).wait().unwrap();
+        let session = super::super::tests::local_session();
         let publisher = session
             .declare_publisher(keys.topic("/obs"))
             .wait()
