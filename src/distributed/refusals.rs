@@ -2,7 +2,8 @@
 //! ([`super::credentials`]) fails the TLS handshake, which Zenoh reports only as a warning
 //! of its TLS link (`zenoh_link_tls`, through the `tracing` crate). [`watch`] installs a
 //! `tracing` subscriber that passes those warnings on, and nothing else (every other
-//! callsite is disabled once, at registration, so it costs nothing after); [`Refusals`]
+//! callsite is disabled once, at registration, so it costs nothing after: a test holds
+//! it); [`Refusals`]
 //! turns them into the launcher's progress lines, rate-limited. With `RUST_LOG` set (Zenoh's
 //! own convention, `RUST_LOG=zenoh=debug`), the same subscriber also writes what it selects
 //! to stderr, as a Zenoh program would: ratelab's subscriber is the process's one.
@@ -89,12 +90,16 @@ pub fn install() {
 fn sinks() -> &'static Mutex<Vec<Sender<String>>> {
     SINKS.get_or_init(|| {
         // Each layer its own filter: a callsite neither selects is disabled at registration.
+        // No layer may be an absent `Option` layer: one says it wants every callsite
+        // (`tracing-subscriber`'s `Option<L>` with `None`), which turns the refusals'
+        // `never` into `sometimes`, and every span Zenoh opens on its hot path is then
+        // made and kept in the registry (about 4% of a launch's process, 2026-12-01).
         let refusals = RefusalLayer.with_filter(tracing_subscriber::filter::filter_fn(is_refusal));
-        let _ = tracing::subscriber::set_global_default(
-            tracing_subscriber::registry()
-                .with(refusals)
-                .with(log_to_stderr()),
-        );
+        let registry = tracing_subscriber::registry().with(refusals);
+        let _ = match log_to_stderr() {
+            Some(log) => tracing::subscriber::set_global_default(registry.with(log)),
+            None => tracing::subscriber::set_global_default(registry),
+        };
         Mutex::new(Vec::new())
     })
 }
@@ -161,5 +166,29 @@ impl Refusals {
 impl Default for Refusals {
     fn default() -> Self {
         Refusals::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Zenoh opens spans and says events on its hot path (a put, a route): once the
+    /// subscriber is installed, all but its TLS link's warnings must be off at the
+    /// callsite, never made and then dropped.
+    #[test]
+    fn once_installed_only_zenohs_tls_warnings_are_enabled() {
+        if std::env::var_os("RUST_LOG").is_some() {
+            eprintln!("skipped: RUST_LOG asks for more than refusals");
+            return;
+        }
+        install();
+        let span = tracing::info_span!(target: "zenoh::net::routing", "route_data");
+        assert!(span.is_disabled(), "a span of Zenoh's routing was made");
+        let span = tracing::trace_span!(target: "zenoh_transport", "schedule");
+        assert!(span.is_disabled(), "a span of Zenoh's transport was made");
+        assert!(!tracing::enabled!(target: "zenoh_transport", tracing::Level::WARN));
+        assert!(!tracing::enabled!(target: "zenoh_link_tls", tracing::Level::INFO));
+        assert!(tracing::enabled!(target: "zenoh_link_tls", tracing::Level::WARN));
     }
 }
