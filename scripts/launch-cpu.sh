@@ -1,25 +1,37 @@
 #!/usr/bin/env bash
 # CPU an instant of the chapter's launch (issue 76 item 4), per process: a long launch of
 # graphs/cartpole.toml across processes under the virtual clock, and over WINDOW_S seconds
-# of it (after 4 s of start-up) the user + system CPU of the launcher and of each of its
-# processes (`/proc/PID/stat`), with the launch's own wall time per instant. Prints one line:
-# each process's CPU in ms over the window and in µs an instant.
+# of it (from its run's start, at most 30 s after the launch) the user + system CPU of the
+# launcher and of each of its processes (`/proc/PID/stat`), with the launch's own wall time
+# per instant. Prints one line: each process's CPU in ms over the window and in µs an
+# instant (the instants in the window counted from the launch's wall time per instant,
+# which is its average over the whole run, window included).
 # Usage: scripts/launch-cpu.sh BINARY [WINDOW_S]   (alone on the machine; default 5 s)
 set -euo pipefail
 bin=$(realpath "${1:?usage: $0 BINARY [WINDOW_S]}"); window=${2:-5}
 root=$(cd "$(dirname "$0")/.." && pwd)
 work=$(mktemp -d)
 launcher=
-cleanup() { [ -n "$launcher" ] && kill -INT "$launcher" 2>/dev/null; rm -rf "$work"; }
+cleanup() {
+  if [ -n "$launcher" ]; then kill -INT "$launcher" 2>/dev/null || true; wait "$launcher" 2>/dev/null || true; fi
+  rm -rf "$work"
+}
 trap cleanup EXIT
 cd "$work"
 "$bin" launch "$root/graphs/cartpole.toml" --processes --clock virtual --duration 100000 \
   --headless >log 2>&1 &
 launcher=$!
-sleep 4
-robot=$(pgrep -P "$launcher" -f -- "--process robot" | head -1)
-policy=$(pgrep -P "$launcher" -f -- "--process policy" | head -1)
+# The run has started once the launcher says its clock (after every process said it is ready).
+robot= policy=
+for _ in $(seq 300); do
+  kill -0 "$launcher" 2>/dev/null || break
+  robot=$(pgrep -P "$launcher" -f -- "--process robot" | head -1 || true)
+  policy=$(pgrep -P "$launcher" -f -- "--process policy" | head -1 || true)
+  if [ -n "$robot" ] && [ -n "$policy" ] && grep -q '^\[ratelab\] clock=' log 2>/dev/null; then break; fi
+  sleep 0.1
+done
 [ -n "$robot" ] && [ -n "$policy" ] || { echo "$0: the launch's processes did not start" >&2; cat log >&2; exit 2; }
+sleep 1
 ticks() { awk '{print $14 + $15}' "/proc/$1/stat"; }
 a1=$(ticks "$launcher"); r1=$(ticks "$robot"); p1=$(ticks "$policy"); t1=$(date +%s%N)
 sleep "$window"

@@ -107,6 +107,10 @@ fn sinks() -> &'static Mutex<Vec<Sender<String>>> {
 /// What `RUST_LOG` selects, written to stderr; `None` when it is unset or not a filter
 /// `tracing_subscriber::EnvFilter` can read (then nothing is logged, as in Zenoh's own
 /// `init_log_from_env`).
+///
+/// A filter with span or field directives (`zenoh[route_data]=debug`) makes `EnvFilter`
+/// want every callsite some of the time, so every span Zenoh opens is made again, as it
+/// would be in any Zenoh program: a cost of debugging with such a filter, not of a run.
 fn log_to_stderr<S>() -> Option<impl Layer<S>>
 where
     S: Subscriber + for<'a> tracing_subscriber::registry::LookupSpan<'a>,
