@@ -15,7 +15,9 @@ use smallvec::SmallVec;
 use std::sync::Arc;
 
 /// Told of every actuator step, on the actuator's thread (a recorder, the lab's telemetry):
-/// it must not block. `ratelab::graph::StepObserver` is one that also sees the graph built.
+/// it must not block. It is told before the run log takes the step ([`RunLog::push`]), so
+/// the record it is given is the step's whole account. `ratelab::graph::StepObserver` is
+/// one that also sees the graph built.
 pub trait StepSink: Send {
     /// One actuator tick happened.
     fn on_step(&mut self, rec: &StepRecord);

@@ -38,7 +38,8 @@ pub fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 /// Something told about every actuator tick (a recorder, the lab's telemetry).
-/// Called on the actuator's thread: it must not block.
+/// Called on the actuator's thread, before the run log ([`GraphHandles::log`]) takes the
+/// step: it must not block.
 pub trait StepObserver: Send {
     /// The graph was built: a chance to keep handles (rates, topics) for later ticks.
     fn attach(&mut self, _handles: &GraphHandles) {}

@@ -233,10 +233,12 @@ impl Actuator {
             fell: outcome.terminated,
             estimate,
         };
-        log(&self.log).push(rec.clone());
+        // The observers first, then the log takes the record itself: no copy of it (its
+        // counters) each step ([`ratelab_core::runlog::StepSink`]).
         for obs in &mut self.observers {
             obs.on_step(&rec);
         }
+        log(&self.log).push(rec);
         if outcome.terminated {
             Flow::Stop
         } else {
