@@ -5,7 +5,7 @@ use crate::cli::{LaunchArgs, ProcessArgs, RouterArgs};
 use crate::headless;
 use ratelab::distributed::check_endpoint;
 use ratelab::distributed::credentials::{Credentials, Role};
-use ratelab::distributed::launcher::{launch, LaunchOptions, LaunchReport};
+use ratelab::distributed::launcher::{launch, LaunchOptions, LaunchReport, LISTENING};
 use ratelab::distributed::monitor::{Signals, Watch};
 use ratelab::distributed::process::ProcessOptions;
 use ratelab::graph::spec::graph_file_bytes;
@@ -328,7 +328,10 @@ fn launch_watched(
     let mut held = Vec::new();
     let mut line = |l: String| {
         if lab {
-            held.push(l);
+            // Where it listens is said at once, below: not again after the lab.
+            if !l.starts_with(LISTENING) {
+                held.push(l);
+            }
         } else {
             println!("[ratelab] launch: {l}");
         }
@@ -353,7 +356,7 @@ fn launch_watched(
     // a launch that got another port than 7449 is found all the same.
     let _recorded = crate::rendezvous::record(&endpoint, &observer, &mut line);
     if lab {
-        eprintln!("[ratelab] launch: listening on {endpoint}");
+        eprintln!("[ratelab] launch: {LISTENING}{endpoint}");
     }
     let mut watch = match Watch::connect(
         std::slice::from_ref(&endpoint),

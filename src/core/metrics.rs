@@ -976,7 +976,8 @@ impl Metrics {
     /// Ctrl-C: its failure starts with [`HUNG`]), `NODE FAILED`,
     /// `FELL at t=…`, `STOPPED BY WATCHDOG at t=…` (QoS `on_deadline_missed=stop`), `PLANT
     /// NEVER STEPPED` (the actuator ran no step), `STOPPED EARLY at t=… of …` (interrupted
-    /// before its duration), `BALANCED while the plant ran` (the actuator lost ticks to an
+    /// before its duration; `STOPPED at t=… (no set length …)` for a run of no set length,
+    /// [`crate::limits::MAX_DURATION_S`], which only stopping ends), `BALANCED while the plant ran` (the actuator lost ticks to an
     /// injected fault, the plant standing still meanwhile), else `BALANCED (pole up the
     /// whole run)`. "The whole run" is said only when the plant stepped the whole run.
     pub fn headline(&self) -> String {
@@ -1012,10 +1013,18 @@ impl Metrics {
             };
             format!("PLANT NEVER STEPPED ({why}; nothing was balanced)")
         } else if self.sim_time_s + 1e-9 < self.duration_s {
-            format!(
-                "STOPPED EARLY at t={:.2}s of {:.2}s (pole up until then)",
-                self.sim_time_s, self.duration_s
-            )
+            if self.duration_s >= crate::limits::MAX_DURATION_S {
+                // No length was set (the lab, a launch on a terminal): it ran until stopped.
+                format!(
+                    "STOPPED at t={:.2}s (no set length; pole up until then)",
+                    self.sim_time_s
+                )
+            } else {
+                format!(
+                    "STOPPED EARLY at t={:.2}s of {:.2}s (pole up until then)",
+                    self.sim_time_s, self.duration_s
+                )
+            }
         } else if let Some(at_s) = self.actuator_killed_at_s() {
             // The plant stood still from the kill to the end: it balanced nothing after.
             format!(
@@ -1201,6 +1210,26 @@ mod tests {
                 m.summary_lines(None)
             );
         }
+    }
+
+    /// A run stopped before its end says of how long; one of no set length (the lab's, a
+    /// launch's on a terminal: the longest run there is) says it had none, not "of
+    /// 315360000.00s".
+    #[test]
+    fn a_run_stopped_says_of_how_long_only_when_it_had_a_length() {
+        let stopped = |duration_s: f64| {
+            let mut m = safety_run(32, 0);
+            (m.fell_at_s, m.sim_time_s, m.duration_s) = (None, 20.42, duration_s);
+            m.headline()
+        };
+        assert_eq!(
+            stopped(60.0),
+            "STOPPED EARLY at t=20.42s of 60.00s (pole up until then)"
+        );
+        assert_eq!(
+            stopped(crate::limits::MAX_DURATION_S),
+            "STOPPED at t=20.42s (no set length; pole up until then)"
+        );
     }
 
     #[test]

@@ -119,6 +119,10 @@ impl LaunchOptions {
 
 pub use crate::MAX_STDERR_LINE;
 
+/// How the launcher's progress line that says where it listens begins (`listening on
+/// tls/HOST:PORT`), said once it listens ([`LaunchOptions::listening`]).
+pub const LISTENING: &str = "listening on ";
+
 /// What a launched run produced.
 pub struct LaunchReport {
     /// The merged summary.
@@ -523,7 +527,7 @@ pub fn launch(
         outboxes: &outboxes,
     };
     let endpoint = me.endpoint.clone();
-    me.say(&format!("listening on {endpoint}"));
+    me.say(&format!("{LISTENING}{endpoint}"));
     me.say(match direct {
         true => "the processes link to the launcher and to each other directly",
         false => "a star: the processes link to the launcher alone",
