@@ -32,6 +32,7 @@
 //! | [`MAX_GRAPH_QUEUE_BYTES`] | 4 GiB | what a graph's queues may hold at worst (every subscription's depth × its type's largest message), computed when the file is read and at every change of a depth, QoS or rate |
 //! | [`MAX_HELD_TRACE_VALUES`] | 64 Mi | the trace a run returns in memory (`ratelab.run`): rows × columns, checked before it starts |
 //! | [`MAX_REAL_CLOCK_THREADS`] | 1024 | the threads a real-clock run starts (one per node on a thread of its own, and the shared executors'), checked before any starts |
+//! | [`MAX_SWEEP_RUNS`] | 100 000 | the runs of one sweep (the product of its lists' lengths), checked before any starts |
 
 /// The most commands a run takes scheduled at run times (`ratelab::run_spec::RunSpec`'s
 /// `commands`: a session log's run).
@@ -203,6 +204,14 @@ const _: () = assert!(MAX_SAMPLE_BYTES as u64 * 16 <= MAX_GRAPH_QUEUE_BYTES);
 /// `MemoryError`), naming the `--trace-every` that fits. `ratelab run --out` holds no trace
 /// (it writes `trace.csv` as the run goes), so its trace has no such bound.
 pub const MAX_HELD_TRACE_VALUES: u64 = 1 << 26;
+
+/// The most runs one sweep makes (`ratelab sweep`, `ratelab.sweep`): the product of its
+/// lists' lengths (clocks × sensor rates × control rates × depths × seeds), 100 000. Each
+/// run keeps a row of figures (about 2 KB) until the sweep ends, so the rows stay within
+/// about 200 MB; at the chapter's 10 s virtual run (a few ms each on one core) such a sweep
+/// takes minutes. A larger grid is refused before any run starts, as a grid of 3 000 × 3 000
+/// rates asked for 20 GB at once.
+pub const MAX_SWEEP_RUNS: usize = 100_000;
 
 #[cfg(test)]
 mod tests {

@@ -15,6 +15,7 @@ use crate::run_spec::RunSpec;
 use crate::sweep::{
     find_cliff, run_grid_until, run_pool, BrainFactory, Cliff, Grid, Point, SweepError,
 };
+use ratelab_core::limits::MAX_SWEEP_RUNS;
 use ratelab_core::metrics::Metrics;
 use ratelab_core::rate::DEFAULT_SPIN_MARGIN;
 use ratelab_runtime::checkpoint::load_policy;
@@ -182,6 +183,26 @@ impl SweepSpec {
         not_empty(&self.queue_depth, Setting::QueueDepth, speech)?;
         not_empty(&self.seeds, Setting::Seeds, speech)?;
         not_empty(&self.clocks, Setting::Clock, speech)?;
+        let lists = [
+            (Setting::Clock, self.clocks.len()),
+            (Setting::SensorHz, self.sensor_hz.len()),
+            (Setting::ControlHz, self.control_hz.len()),
+            (Setting::QueueDepth, self.queue_depth.len()),
+            (Setting::Seeds, self.seeds.len()),
+        ];
+        let runs = (lists.iter()).try_fold(1usize, |runs, &(_, n)| runs.checked_mul(n));
+        if runs.is_none_or(|runs| runs > MAX_SWEEP_RUNS) {
+            let names: Vec<&str> = lists.iter().map(|&(s, _)| speech.name(s)).collect();
+            let sizes: Vec<String> = lists.iter().map(|&(_, n)| n.to_string()).collect();
+            anyhow::bail!(ratelab_core::limits::refusal(
+                format_args!(
+                    "{}: a sweep of {} runs is too many; a sweep makes at most {MAX_SWEEP_RUNS}",
+                    names.join(" × "),
+                    sizes.join(" × ")
+                ),
+                "MAX_SWEEP_RUNS"
+            ));
+        }
         for &hz in &self.sensor_hz {
             rate("sensor-hz", hz, speech)?;
         }
@@ -432,6 +453,59 @@ mod tests {
             words.starts_with("seeds: an empty list runs nothing"),
             "{words}"
         );
+    }
+
+    /// A grid of more runs than a sweep makes is refused before any run, in one line naming
+    /// the lists and the bound (a grid of 3 000 × 3 000 rates asked for 20 GB at once). At
+    /// the bound it is a grid.
+    #[test]
+    fn a_grid_of_too_many_runs_is_refused_before_any_starts() {
+        let rates = |n: usize| (1..=n).map(|i| i as f64).collect::<Vec<f64>>();
+        let spec = SweepSpec {
+            control_hz: rates(3_000),
+            sensor_hz: rates(3_000),
+            seeds: vec![0],
+            ..SweepSpec::default()
+        };
+        let (flags, words) = sweep_refused(&spec);
+        assert!(
+            flags.starts_with("--clock × --sensor-hz × --control-hz × --queue-depth × --seeds: a sweep of 1 × 3000 × 3000 × 1 × 1 runs is too many; a sweep makes at most 100000"),
+            "{flags}"
+        );
+        assert!(
+            flags.ends_with("(ratelab::limits::MAX_SWEEP_RUNS)"),
+            "{flags}"
+        );
+        assert!(
+            words.starts_with("clock × sensor_hz × control_hz × queue_depth × seeds: "),
+            "{words}"
+        );
+        assert!(!words.contains('\n'));
+        // A product past usize is refused too, not wrapped round.
+        let spec = SweepSpec {
+            seeds: vec![0; 1 << 16],
+            queue_depth: vec![1; 1 << 16],
+            control_hz: vec![50.0; 1 << 16],
+            sensor_hz: vec![50.0; 1 << 16],
+            ..SweepSpec::default()
+        };
+        assert!(sweep_refused(&spec).0.contains("is too many"));
+        // At the bound: a grid.
+        let spec = SweepSpec {
+            control_hz: rates(400),
+            sensor_hz: rates(250),
+            seeds: vec![0],
+            ..SweepSpec::default()
+        };
+        assert_eq!(spec.clocks.len() * spec.queue_depth.len(), 1);
+        assert!(spec.grid(Speech::Flags).is_ok());
+        let spec = SweepSpec {
+            seeds: vec![0, 1],
+            ..spec
+        };
+        assert!(sweep_refused(&spec)
+            .0
+            .contains("1 × 250 × 400 × 1 × 2 runs is too many"));
     }
 
     #[test]
