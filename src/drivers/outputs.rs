@@ -142,7 +142,10 @@ pub fn check_out(a: &Outputs, graph: &GraphSpec, speech: Speech) -> anyhow::Resu
         })?;
         // Refuse before the run, not after it: the outputs will not be writable.
         let estimator = graph.estimate_topic().map(|_| ESTIMATOR_JSON);
-        for name in ["metrics.json", "trace.csv"].into_iter().chain(estimator) {
+        for name in ["metrics.json", "trace.csv", "log.txt"]
+            .into_iter()
+            .chain(estimator)
+        {
             ratelab_core::output::check_target(&dir.join(name), a.force)?;
         }
     }

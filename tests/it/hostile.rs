@@ -1018,6 +1018,25 @@ fn outputs_never_write_through_links_into_fifos_or_over_files() {
     assert!(std::fs::read_to_string(out.join("metrics.json"))
         .unwrap()
         .contains("\"steps\""));
+    // An existing log.txt alone, too: refused before the run (it was refused only after
+    // it, and the run's figures were lost), nothing written.
+    let logged = d.join("logged");
+    std::fs::create_dir(&logged).unwrap();
+    std::fs::write(logged.join("log.txt"), b"precious").unwrap();
+    let o = run_child(
+        &["run", "--smoke", "--out", logged.to_str().unwrap()],
+        d,
+        Duration::from_secs(30),
+        |_| {},
+    );
+    assert_eq!(o.code, Some(2), "{o:?}");
+    assert!(
+        o.stderr.contains("log.txt") && o.stderr.contains("--force"),
+        "{o:?}"
+    );
+    assert!(!o.stdout.contains("BALANCED"), "the run went ahead: {o:?}");
+    assert!(!logged.join("metrics.json").exists());
+    assert_eq!(std::fs::read(logged.join("log.txt")).unwrap(), b"precious");
     // sweep --csv over an existing file.
     assert_refused(
         &[
