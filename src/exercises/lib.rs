@@ -552,9 +552,11 @@ fn open(key: &str, line: String) -> Said {
     }
 }
 
-/// A prediction value as a number (TOML integer or float).
+/// A prediction value as a number (TOML integer or float). TOML's `inf` and `nan` are not
+/// a prediction (infinity would be "the same" as any rate, [`same`]): `None`, as a value of
+/// the wrong type is.
 fn number(v: &toml::Value) -> Option<f64> {
-    v.as_float().or_else(|| v.as_integer().map(|i| i as f64))
+    (v.as_float().or_else(|| v.as_integer().map(|i| i as f64))).filter(|x| x.is_finite())
 }
 
 /// The sentence for a prediction key that is missing or not of the expected type.
@@ -1299,6 +1301,14 @@ mod tests {
         });
         assert!(said[0].line.ends_with(": right."));
         assert_eq!(said[0].verdict, Verdict::Right);
+        // Infinity is no rate (it was "right" of any), nor is nan: unreadable, not graded.
+        for bad in ["inf", "-inf", "nan"] {
+            let f = file(&format!("fails_at_hz = {bad}\nwhy = \"w\""));
+            let said = f.reconcile(&Ex1Outcome {
+                fails_at_hz: Some(5.0),
+            });
+            assert_eq!(said[0].verdict, Verdict::Unreadable, "{bad}: {said:?}");
+        }
         let f = file("deep_queue_obs_drops = 0\ndeep_queue_balances = true\nwhy = \"w\"");
         let said = f.reconcile(&Ex2Outcome {
             deep_queue_obs_drops: 0,
