@@ -32,6 +32,9 @@ pub enum ConfigError {
     },
     /// Queue depth 0.
     Depth(usize),
+    /// A queue depth the graph refuses (past its bound, or its queues past theirs): the
+    /// graph's reason ([`crate::graph::GraphSpec::set_all_depths`]).
+    QueueDepth(OverrideError),
     /// A graph override (`--rate`, `--depth`, a chapter shorthand) that does not fit.
     Graph(OverrideError),
     /// Duration not finite, ≤ 0, or above [`MAX_DURATION_S`].
@@ -100,6 +103,7 @@ impl ConfigError {
             ConfigError::Depth(d) => {
                 format!("{} must be at least 1, got {d}", name(Setting::QueueDepth))
             }
+            ConfigError::QueueDepth(e) => format!("{}: {e}", name(Setting::QueueDepth)),
             ConfigError::Graph(e) => e.to_string(),
             ConfigError::Duration(s) => format!(
                 "{} must be in (0, {MAX_DURATION_S}] seconds, got {s} (ratelab::limits::MAX_DURATION_S)",
@@ -145,7 +149,7 @@ impl std::error::Error for ConfigError {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
             // Transparent, as the line is the override's own.
-            ConfigError::Graph(e) => std::error::Error::source(e),
+            ConfigError::Graph(e) | ConfigError::QueueDepth(e) => std::error::Error::source(e),
             _ => None,
         }
     }
@@ -309,7 +313,7 @@ impl RunConfig {
         if depth == 0 {
             return Err(ConfigError::Depth(0));
         }
-        Ok(self.graph.set_all_depths(depth)?)
+        (self.graph.set_all_depths(depth)).map_err(ConfigError::QueueDepth)
     }
 
     /// These settings with the chapter's rates and depth (builder style, for tests and
@@ -453,6 +457,19 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("--queue-depth"));
+        // Past the bound: the setting named in each front end's words, once.
+        let past = cfg
+            .set_queue_depth(ratelab_core::qos::MAX_DEPTH + 1)
+            .unwrap_err();
+        let max = ratelab_core::qos::MAX_DEPTH;
+        assert_eq!(
+            past.line(Speech::Flags),
+            format!("--queue-depth: depth must be in 1..={max}, got {}", max + 1)
+        );
+        assert_eq!(
+            past.line(Speech::Keywords),
+            format!("queue_depth: depth must be in 1..={max}, got {}", max + 1)
+        );
         cfg.set_control_hz(5.0).unwrap();
         assert_eq!(cfg.control_hz(), Some(5.0));
         assert!(RunConfig::default().validate().is_ok());

@@ -854,10 +854,11 @@ impl GraphSpec {
     ///
     /// # Errors
     /// [`OverrideError`] for a depth outside 1..=[`MAX_DEPTH`], or one that takes the
-    /// graph's queues past [`ratelab_core::limits::MAX_GRAPH_QUEUE_BYTES`] (nothing changes).
+    /// graph's queues past [`ratelab_core::limits::MAX_GRAPH_QUEUE_BYTES`] (nothing changes),
+    /// its line naming no setting (`depth must be in 1..=1000000, got 0`): the caller names
+    /// the one it was given as (`--queue-depth`, `queue_depth`).
     pub fn set_all_depths(&mut self, depth: usize) -> Result<(), OverrideError> {
-        check_depth(i64::try_from(depth).unwrap_or(i64::MAX))
-            .map_err(|e| OverrideError(format!("--queue-depth: {e}")))?;
+        check_depth(i64::try_from(depth).unwrap_or(i64::MAX)).map_err(OverrideError)?;
         let was: Vec<usize> = self
             .topics
             .iter_mut()
@@ -867,7 +868,7 @@ impl GraphSpec {
             for (t, d) in self.topics.iter_mut().zip(was) {
                 t.depth = d;
             }
-            return Err(OverrideError(format!("--queue-depth {depth}: {e}")));
+            return Err(OverrideError(format!("depth {depth}: {e}")));
         }
         Ok(())
     }
