@@ -60,13 +60,35 @@ pub fn checkpoint_tensors(path: &Path) -> Result<Vec<Exported>, PolicyError> {
     Ok(out)
 }
 
+/// The longest tensor name [`to_npz`] writes as an archive member, bytes (a PyTorch key such
+/// as `actor.0.weight` is tens).
+pub const MAX_TENSOR_NAME_BYTES: usize = 255;
+
+/// A tensor name (a checkpoint's key, untrusted) fit to name an archive member as it is:
+/// letters, digits, `_`, `.` and `-`, not starting with `.`, at most
+/// [`MAX_TENSOR_NAME_BYTES`]. A name such as `../../etc/x` would otherwise become a member
+/// that an unzip writes outside its folder.
+fn plain_member_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= MAX_TENSOR_NAME_BYTES
+        && !name.starts_with('.')
+        && (name.bytes()).all(|b| b.is_ascii_alphanumeric() || b"_.-".contains(&b))
+}
+
 /// `tensors` as the bytes of an uncompressed `.npz` archive (NumPy's `savez`), one float32
 /// array per tensor named by its key.
 ///
 /// # Errors
-/// A message when a shape does not match its values (not for [`checkpoint_tensors`]'
-/// output) or the archive cannot be written.
+/// A message when a tensor's name is not a plain member name ([`plain_member_name`]'s
+/// rule, nothing written), a shape does not match its values (not for
+/// [`checkpoint_tensors`]' output) or the archive cannot be written.
 pub fn to_npz(tensors: &[Exported]) -> Result<Vec<u8>, String> {
+    if let Some(t) = tensors.iter().find(|t| !plain_member_name(&t.name)) {
+        let shown: String = t.name.chars().take(80).collect();
+        return Err(format!(
+            "tensor {shown:?}: a name of letters, digits, '_', '.' and '-' (not starting with '.', at most {MAX_TENSOR_NAME_BYTES} bytes) is needed to name it in an archive"
+        ));
+    }
     let mut npz = ndarray_npy::NpzWriter::new(std::io::Cursor::new(Vec::new()));
     for t in tensors {
         let array = ndarray::ArrayD::from_shape_vec(t.shape.clone(), t.values.clone())
@@ -111,5 +133,43 @@ mod tests {
             values: vec![1.0],
         };
         assert!(to_npz(&[bad]).unwrap_err().starts_with("tensor 'bad'"));
+    }
+
+    /// A checkpoint's keys are untrusted: one that would name a member outside the folder
+    /// an unzip writes to (or a hidden one, or one of control characters) is refused, with
+    /// nothing written.
+    #[test]
+    fn a_tensor_name_that_is_not_a_plain_member_name_is_refused() {
+        let named = |name: &str| Exported {
+            name: name.into(),
+            shape: vec![1],
+            values: vec![1.0],
+        };
+        for bad in [
+            "../../etc/evil",
+            "/abs",
+            "a/b",
+            "a\\b",
+            ".hidden",
+            "",
+            "a\nb",
+            "é",
+        ] {
+            let e = to_npz(&[named("ok.weight"), named(bad)]).unwrap_err();
+            assert!(
+                e.contains("is needed to name it in an archive"),
+                "{bad:?}: {e}"
+            );
+            assert!(!e.contains('\n'), "{e}");
+        }
+        let long = "a".repeat(MAX_TENSOR_NAME_BYTES + 1);
+        assert!(to_npz(&[named(&long)]).is_err());
+        for good in [
+            "actor.0.weight",
+            "model.layers.10.self_attn.q_proj-bias",
+            "a",
+        ] {
+            assert!(to_npz(&[named(good)]).is_ok(), "{good}");
+        }
     }
 }
