@@ -164,7 +164,7 @@ pub struct GenerateArgs {
     pub processes: u32,
     /// Every controller's rate, Hz, instead of 10, 20, 50 and 100 in turn (0.01: idle
     /// nodes, for measuring what a node costs when it is not due).
-    #[arg(long, value_parser = parse_rate("--controller-hz"))]
+    #[arg(long, value_parser = parse_rate("controller-hz"))]
     pub controller_hz: Option<f64>,
 }
 

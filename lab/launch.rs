@@ -60,6 +60,8 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     cfg.graph
         .check_executors_per_process()
         .map_err(anyhow::Error::msg)?;
+    // Refused before anything is said of the placement (a line naming 49,151 processes).
+    ratelab::distributed::check_keys(&cfg.graph)?;
     if on_terminal && run.duration.is_none() && !run.smoke {
         cfg.duration = ratelab::session::UNBOUNDED; // as the lab: until you quit
     }

@@ -220,6 +220,12 @@ fn every_bound_refuses_in_one_line_naming_it() {
     ] {
         assert_one_line_exit_2(&o, needle);
     }
+    // Refused before the placement is said (a line naming all 752 processes came first).
+    assert!(
+        o.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
     // A node given more than MAX_NODE_PARAMS parameters.
     let params = path("params.toml");
     let table: Vec<String> = (0..=ratelab::limits::MAX_NODE_PARAMS)
@@ -253,6 +259,14 @@ fn every_bound_refuses_in_one_line_naming_it() {
     // `ratelab graph` itself keeps to the bounds.
     let o = ratelab(&["graph", "--nodes", "65537"]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    // A rate refused by its flag's name, written once (it came with four dashes).
+    let o = ratelab(&["graph", "--nodes", "10", "--controller-hz", "0"]);
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("--controller-hz must be") && !err.contains("---"),
+        "{err}"
+    );
 }
 
 /// A thinned trace says so where the files are said to be written, and only then.
