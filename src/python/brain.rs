@@ -81,7 +81,10 @@ impl PythonBrain {
             let support = support(py)?;
             let loaded = {
                 let _running = CallbackGuard::enter_loading(&format!("loading {script}"), None);
-                support.call_method1("load_module", (script, source, module_name))
+                // `import ratelab` gives the message classes, as in a node's script.
+                super::install_messages(py).and_then(|()| {
+                    support.call_method1("load_module", (script, source, module_name))
+                })
             };
             let module = loaded.map_err(|e| PythonError::Script(describe(py, &e, script)))?;
             let call = support

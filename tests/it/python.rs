@@ -167,6 +167,23 @@ fn a_named_function_is_run_and_its_return_value_may_be_a_float_or_an_array() {
     assert_eq!(trace, builtin_trace);
 }
 
+/// A brain file imports the message classes as a node's script does (`from ratelab import
+/// Force`: docs/python.md), and uses them.
+#[test]
+fn a_brain_file_imports_the_message_classes() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = script(
+        dir.path(),
+        "typed.py",
+        "from ratelab import Force, State\n\
+         def act(obs):\n\
+         \x20   s = State(*[float(x) for x in obs])\n\
+         \x20   return Force(newtons=0.0).newtons + 0.0 * s.cart_pos_m\n",
+    );
+    let o = ratelab(&["run", "--smoke", "--policy", p.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+}
+
 fn assert_refused(policy: &str, needles: &[&str]) {
     let o = ratelab(&[
         "run",
