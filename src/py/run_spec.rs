@@ -134,7 +134,15 @@ fn get<'py, T: pyo3::conversion::FromPyObjectOwned<'py>>(
     match settings.get_item(key)? {
         None => Ok(None),
         Some(v) if v.is_none() => Ok(None),
-        Some(v) => v.extract::<T>().map(Some).map_err(|_| {
+        Some(v) => v.extract::<T>().map(Some).map_err(|e| {
+            // A whole number past what the setting can hold (2**64 as a depth): its range,
+            // not its type, is wrong.
+            let e: pyo3::PyErr = e.into();
+            if e.is_instance_of::<pyo3::exceptions::PyOverflowError>(v.py()) {
+                return PyValueError::new_err(format!(
+                    "{key} takes {what}: a number of it is out of range"
+                ));
+            }
             let got = v
                 .get_type()
                 .name()
@@ -263,7 +271,11 @@ fn read_run(settings: &Bound<'_, PyDict>, spec: &mut RunSpec) -> PyResult<()> {
     spec.sensor_hz = get(settings, "sensor_hz", "a rate in Hz")?;
     if let Some(depth) = get::<i128>(settings, "queue_depth", "an int")? {
         spec.queue_depth = Some(usize::try_from(depth).map_err(|_| {
-            PyValueError::new_err(format!("queue_depth must be at least 1, got {depth}"))
+            let rule = match depth < 1 {
+                true => "must be at least 1".to_string(),
+                false => format!("must be in 1..={}", ratelab::qos::MAX_DEPTH),
+            };
+            PyValueError::new_err(format!("queue_depth {rule}, got {depth}"))
         })?);
     }
     spec.phase_offset_ms = get(settings, "phase_offset_ms", "a list of ms")?.unwrap_or_default();
@@ -279,7 +291,11 @@ fn read_run(settings: &Bound<'_, PyDict>, spec: &mut RunSpec) -> PyResult<()> {
             .ok()
             .filter(|n| *n >= 1)
             .ok_or_else(|| {
-                PyValueError::new_err(format!("trace_every must be at least 1, got {every}"))
+                let rule = match every < 1 {
+                    true => "must be at least 1".to_string(),
+                    false => format!("must be in 1..={}", u64::MAX),
+                };
+                PyValueError::new_err(format!("trace_every {rule}, got {every}"))
             })?;
     }
     Ok(())

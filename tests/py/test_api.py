@@ -865,6 +865,10 @@ FLAG = re.compile(r"--[a-z]")
     ({"sensor_hz": 0}, "sensor_hz"),
     ({"queue_depth": 0}, "queue_depth"),
     ({"queue_depth": 2**20 + 1}, "queue_depth"),
+    ({"queue_depth": 2**70}, "queue_depth"),
+    ({"trace_every": 2**64}, "trace_every"),
+    ({"control_hz": 10**400}, "control_hz"),
+    ({"depth": {"/obs": 2**64}}, "depth"),
     ({"duration_s": 0}, "duration_s"),
     ({"trace_every": 0}, "trace_every"),
     ({"seed": -1}, "seed"),
@@ -879,6 +883,12 @@ def test_errors_name_python_parameters_never_flags(settings, name):
     line = str(e.value)
     assert name in line and not FLAG.search(line), line
     assert isinstance(e.value, ratelab.Error)
+    # A number too large is out of range, said as such (not "at least 1", not "got list").
+    value = next(iter(settings.values()))
+    huge = lambda v: isinstance(v, int) and v > 2**40  # noqa: E731
+    if huge(value) or isinstance(value, dict) and any(huge(v) for v in value.values()):
+        assert "at least 1" not in line and "got list" not in line, line
+        assert "range" in line or "in 1..=" in line or "too large" in line, line
 
 
 def test_dir_lists_the_public_api_not_the_imports():

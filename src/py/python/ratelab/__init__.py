@@ -179,7 +179,13 @@ def _real(name: str, value: Any, unit: str = "") -> float:
     value = _scalar(value)
     if _is_bool(value) or not isinstance(value, numbers.Real):
         raise SettingTypeError(f"{name} must be a number{_in(unit)} got {value!r}")
-    return float(value)
+    try:
+        return float(value)
+    except OverflowError:
+        raise SettingError(
+            f"{name} is too large for a number{_in(unit)} got an int of "
+            f"{int(value).bit_length()} bits"
+        ) from None
 
 
 def _whole(name: str, value: Any, unit: str = "", negative_ok: bool = False) -> int:
