@@ -328,15 +328,10 @@ fn launch_watched(
         Err(_) => Err(anyhow::anyhow!("the launcher stopped unexpectedly")),
     };
     let mut held = Vec::new();
-    let mut line = |l: String| {
-        if lab {
-            // Where it listens is said at once, below: not again after the lab.
-            if !l.starts_with(LISTENING) {
-                held.push(l);
-            }
-        } else {
-            println!("[ratelab] launch: {l}");
-        }
+    let mut line = |l: String| match lab {
+        // Where it listens is said at once, below: not again after the lab.
+        true => held.extend((!l.starts_with(LISTENING)).then_some(l)),
+        false => println!("[ratelab] launch: {l}"),
     };
     // The launcher tells where it listens, before anything else; the watcher connects
     // there. Its lines meanwhile (none yet, or the error that stopped it) pass on.
