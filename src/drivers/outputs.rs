@@ -142,15 +142,16 @@ pub fn check_out(a: &Outputs, graph: &GraphSpec, speech: Speech) -> anyhow::Resu
         })?;
         // Refuse before the run, not after it: the outputs will not be writable.
         let estimator = graph.estimate_topic().map(|_| ESTIMATOR_JSON);
-        for name in ["metrics.json", "trace.csv", "log.txt"]
-            .into_iter()
-            .chain(estimator)
-        {
+        for name in OUT_FILES.into_iter().chain(estimator) {
             ratelab_core::output::check_target(&dir.join(name), a.force)?;
         }
     }
     Ok(())
 }
+
+/// The files `--out` writes in one process, whatever the graph ([`write_outputs`]): each is
+/// checked before the run ([`check_out`]) and again before any is written.
+const OUT_FILES: [&str; 3] = ["metrics.json", "trace.csv", "log.txt"];
 
 /// With an estimator in the graph, `--out`'s file of its error and lag against the truth
 /// ([`ratelab_core::estimate::EstimateReport`]; not in `metrics.json`, whose bytes the reference
@@ -306,10 +307,11 @@ pub fn write_outputs(
     trace: TraceCsv<'_>,
 ) -> anyhow::Result<()> {
     // Every name is checked before any is written, so a refusal writes nothing.
-    let (metrics, trace_csv) = (dir.join("metrics.json"), dir.join("trace.csv"));
-    ratelab_core::output::check_target(&metrics, force)?;
-    ratelab_core::output::check_target(&trace_csv, force)?;
-    ratelab_core::output::check_target(&dir.join("log.txt"), force)?;
+    let paths = OUT_FILES.map(|name| dir.join(name));
+    for path in &paths {
+        ratelab_core::output::check_target(path, force)?;
+    }
+    let [metrics, trace_csv, log_txt] = paths;
     let estimator = report
         .metrics
         .estimate
@@ -336,6 +338,6 @@ pub fn write_outputs(
         TraceCsv::Streamed(file) => file.commit()?,
         TraceCsv::Held(bytes) => ratelab_core::output::write_file(&trace_csv, force, bytes)?,
     }
-    ratelab_core::output::write_file(&dir.join("log.txt"), force, log.as_bytes())?;
+    ratelab_core::output::write_file(&log_txt, force, log.as_bytes())?;
     Ok(())
 }
