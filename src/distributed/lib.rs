@@ -360,6 +360,22 @@ impl Keys {
         format!("{}/@node/{process}/{node}", self.prefix)
     }
 
+    /// The process of a node's token ([`Keys::node_token`]) of this graph: `policy` of
+    /// `ratelab/<graph>/@node/policy/mlp`; `None` for any other key.
+    pub fn process_of_node_token<'k>(&self, key: &'k str) -> Option<&'k str> {
+        let rest = key
+            .strip_prefix(self.prefix.as_str())?
+            .strip_prefix("/@node/")?;
+        match rest.split_once('/') {
+            Some((process, node))
+                if !process.is_empty() && !node.is_empty() && !node.contains('/') =>
+            {
+                Some(process)
+            }
+            _ => None,
+        }
+    }
+
     /// A publisher's or subscriber's token (`role` is `pub` or `sub`), carrying the topic's
     /// QoS in short (spaces as `_`): `ratelab/<graph>/@pub/obs/KL1_latest/sensor`.
     pub fn endpoint_token(&self, role: &str, topic: &str, qos: &str, node: &str) -> String {
@@ -906,6 +922,24 @@ mod tests {
         assert_eq!(super::ready_wait(3), Duration::from_millis(21_560));
         assert_eq!(super::ready_wait(256), Duration::from_millis(153_120));
         assert!(super::ready_wait(usize::MAX) > super::ready_wait(64));
+    }
+
+    #[test]
+    fn a_node_token_names_its_process() {
+        let keys = super::Keys::new("cartpole");
+        let token = keys.node_token("policy", "mlp");
+        assert_eq!(keys.process_of_node_token(&token), Some("policy"));
+        for other in [
+            "ratelab/cartpole/@node/policy",
+            "ratelab/cartpole/@node//mlp",
+            "ratelab/cartpole/@node/policy/",
+            "ratelab/cartpole/@node/policy/mlp/x",
+            "ratelab/cartpole/@pub/obs/KL1/sensor",
+            "ratelab/other/@node/policy/mlp",
+            "ratelab/cartpole2/@node/policy/mlp",
+        ] {
+            assert_eq!(keys.process_of_node_token(other), None, "{other}");
+        }
     }
 
     #[test]

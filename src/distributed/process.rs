@@ -164,8 +164,12 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         wire_latency,
     } = inbound_ends;
     let tokens = declare_tokens(&session, &keys, &spec, &mine, &opts.process)?;
-    let linked = (setup.direct && !opts.listen.is_empty()).then(|| spec.placement().len() - 1);
-    join::wait_heard(&session, (&publishers, linked), stop, &launcher_gone)?;
+    let others: Vec<String> = (spec.placement().into_iter())
+        .map(|(p, _)| p)
+        .filter(|p| p != me)
+        .collect();
+    let linked = (setup.direct && !opts.listen.is_empty()).then_some(others.as_slice());
+    join::wait_heard(&session, &keys, (&publishers, linked), stop, &launcher_gone)?;
     let mut reporting = stepper::Reporting::declare(&session, &keys, &opts.process, setup.direct)?;
     // --ros2: this process offers its own nodes; the plant's process `/clock` too. Before
     // saying ready: the wait for external nodes must not eat into the run.
@@ -885,6 +889,52 @@ mod tests {
         outlet.send(4, Nanos(100), None, &force);
         bridge.put_kept(None).unwrap();
         assert_eq!(got(), (4, None));
+    }
+
+    #[test]
+    fn linked_directly_a_process_waits_for_each_other_process_s_nodes() {
+        use ratelab_runtime::scheduler::StopFlag;
+        let session = local_session();
+        let keys = crate::Keys::new("g");
+        let others = ["policy".to_string(), "actuator".to_string()];
+        let stop = StopFlag::new();
+        let soon = (None, std::time::Duration::from_millis(300));
+        // Nothing announced: both named.
+        let _token = session
+            .liveliness()
+            .declare_token(keys.node_token("policy", "mlp"))
+            .wait()
+            .unwrap();
+        let _elsewhere = session
+            .liveliness()
+            .declare_token(crate::Keys::new("h").node_token("actuator", "motor"))
+            .wait()
+            .unwrap();
+        let e = super::join::wait_subscribed(&session, &keys, &others, &stop, soon)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("linked directly: actuator ("), "{e}");
+        assert!(!e.contains("policy"), "{e}");
+        // The last one announced while it waits: it returns.
+        let late = {
+            let (session, keys) = (session.clone(), keys.clone());
+            std::thread::spawn(move || {
+                std::thread::sleep(std::time::Duration::from_millis(100));
+                session
+                    .liveliness()
+                    .declare_token(keys.node_token("actuator", "motor"))
+                    .wait()
+                    .unwrap()
+            })
+        };
+        let patient = (None, std::time::Duration::from_secs(20));
+        super::join::wait_subscribed(&session, &keys, &others, &stop, patient).unwrap();
+        let _late = late.join().unwrap();
+        // Stopped: it says so at once.
+        stop.stop();
+        let more = ["sensor".to_string()];
+        let e = super::join::wait_subscribed(&session, &keys, &more, &stop, patient).unwrap_err();
+        assert!(e.to_string().contains("interrupted"), "{e}");
     }
 
     #[test]

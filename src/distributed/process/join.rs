@@ -258,22 +258,25 @@ pub(super) fn wait_matching(
 }
 
 /// Wait until what this process publishes across is heard: linked directly (`linked`: the
-/// launch's other processes, [`wait_linked`]) to each other process, and each of
-/// `publishers` matched by its subscriber (the launcher, or linked directly the subscribing
-/// process) while the launcher is there (not `gone`). The subscribing process subscribes
-/// before it says it is ready, and the run starts once all are.
+/// launch's other processes, by name) to each other process ([`wait_linked`]) and each of
+/// them subscribed to all it hears ([`wait_subscribed`]), and each of `publishers` matched
+/// by its subscriber (the launcher, or linked directly a subscribing process) while the
+/// launcher is there (not `gone`). The subscribing process subscribes before it says it is
+/// ready, and the run starts once all are.
 ///
 /// # Errors
-/// As [`wait_linked`] and [`wait_matching`].
+/// As [`wait_linked`], [`wait_subscribed`] and [`wait_matching`].
 pub(super) fn wait_heard(
     session: &zenoh::Session,
-    (publishers, linked): (&super::bridge::Publishers, Option<usize>),
+    keys: &Keys,
+    (publishers, linked): (&super::bridge::Publishers, Option<&[String]>),
     stop: &StopFlag,
     launcher_gone: &StopFlag,
 ) -> Result<(), DistError> {
     let while_there = (Some(launcher_gone), REPLY_TIMEOUT);
     if let Some(others) = linked {
-        wait_linked(session, others, stop, while_there)?;
+        wait_linked(session, others.len(), stop, while_there)?;
+        wait_subscribed(session, keys, others, stop, while_there)?;
     }
     let subscriber = match linked {
         Some(_) => "the subscribing process",
@@ -283,6 +286,74 @@ pub(super) fn wait_heard(
         wait_matching(p, stop, while_there, subscriber)?;
     }
     Ok(())
+}
+
+/// Linked directly: wait until each of `others` (process names) has subscribed to all it
+/// hears from this process, its samples and its tick reports, as its node tokens show
+/// (`@node/<process>/<node>`, [`Keys::node_token`]): a process declares them after its
+/// subscribers, and a peer's declarations reach this one in the order it made them. A
+/// publisher's matching says only that some subscriber is there, and the first tick report
+/// sent before another process's subscriber is known here would be lost to it (a peer
+/// sends only where it knows a subscriber), its lockstep stalled. For `patience` at most,
+/// and not after the launcher is gone when `gone` watches it.
+///
+/// # Errors
+/// [`DistError::Peer`] on `stop`, the launcher gone, or a process not heard of after
+/// `patience` (naming them), [`DistError::Zenoh`] when the tokens cannot be watched.
+pub(super) fn wait_subscribed(
+    session: &zenoh::Session,
+    keys: &Keys,
+    others: &[String],
+    stop: &StopFlag,
+    (gone, patience): (Option<&StopFlag>, Duration),
+) -> Result<(), DistError> {
+    let heard: Arc<Mutex<std::collections::BTreeSet<String>>> = Arc::default();
+    let _watch = {
+        let (heard, keys) = (heard.clone(), keys.clone());
+        session
+            .liveliness()
+            .declare_subscriber(keys.node_token("*", "*"))
+            .history(true)
+            .callback(move |s| {
+                if s.kind() == zenoh::sample::SampleKind::Put {
+                    if let Some(p) = keys.process_of_node_token(s.key_expr().as_str()) {
+                        heard
+                            .lock()
+                            .unwrap_or_else(|e| e.into_inner())
+                            .insert(p.to_string());
+                    }
+                }
+            })
+            .wait()?
+    };
+    let deadline = Instant::now() + patience;
+    loop {
+        let missing: Vec<&str> = {
+            let heard = heard.lock().unwrap_or_else(|e| e.into_inner());
+            others
+                .iter()
+                .filter(|p| !heard.contains(p.as_str()))
+                .map(String::as_str)
+                .collect()
+        };
+        if missing.is_empty() {
+            return Ok(());
+        }
+        if stop.is_stopped() {
+            return Err(DistError::Peer("interrupted".into()));
+        }
+        if gone.is_some_and(StopFlag::is_stopped) {
+            return Err(DistError::Peer("the launcher went away".into()));
+        }
+        if gone.is_none() && Instant::now() >= deadline {
+            return Err(DistError::Peer(format!(
+                "not subscribed within {} s, linked directly: {} (a process announces its nodes once it has subscribed)",
+                patience.as_secs(),
+                ratelab_core::text::listed(missing)
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
 }
 
 /// Wait until this peer's `session` is linked to `others` peers (the launch's other
