@@ -71,7 +71,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     if let Some(dir) = &run.out {
         std::fs::create_dir_all(dir)
             .map_err(|e| anyhow::anyhow!("cannot create --out folder {}: {e}", dir.display()))?;
-        ratelab::output::check_target(&dir.join("metrics.json"), run.force)?;
+        ratelab::output::check_writable(&dir.join("metrics.json"), run.force)?;
     }
     if a.no_spawn && a.export_credentials.is_none() {
         anyhow::bail!("--no-spawn waits for processes started by hand, which need the launch's credentials: give --export-credentials FILE");

@@ -68,7 +68,7 @@ fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
     if let Some(p) = &session_file {
         // The session log is saved over and over during the session: an existing file
         // is only replaced with --force (and never through a link or into a non-file).
-        ratelab::output::check_target(p, args.force)
+        ratelab::output::check_writable(p, args.force)
             .map_err(|e| anyhow::anyhow!("--session {e}"))?;
     }
     // Checked and opened before the screen opens: a bad name or setting is one line, exit 2.
@@ -141,7 +141,7 @@ fn replay(args: &cli::ReplayArgs) -> anyhow::Result<()> {
         std::fs::create_dir_all(dir)
             .map_err(|e| anyhow::anyhow!("cannot create --out folder {}: {e}", dir.display()))?;
         for n in 1..=log.runs.len() {
-            ratelab::output::check_target(&dir.join(format!("metrics-{n}.json")), args.force)?;
+            ratelab::output::check_writable(&dir.join(format!("metrics-{n}.json")), args.force)?;
         }
     }
     if log.runs.is_empty() {

@@ -34,7 +34,7 @@ pub fn progress_bar(total: usize, unit: &str) -> Option<ProgressBar> {
 /// Ctrl-C (`stop`) ends the run in progress at once and prints what completed.
 pub fn run_sweep(a: &SweepArgs, stop: &StopFlag) -> anyhow::Result<()> {
     for p in [&a.csv, &a.json].into_iter().flatten() {
-        ratelab::output::check_target(p, a.force)?; // refuse before hours of runs, not after
+        ratelab::output::check_writable(p, a.force)?; // refuse before hours of runs, not after
     }
     let rows = sweep_rows(a, stop)?;
     print_table(&rows);

@@ -70,6 +70,20 @@ pub fn check_target(path: &Path, force: bool) -> Result<(), OutputError> {
     }
 }
 
+/// Check that `path` can be written now, before a long run rather than after it:
+/// [`check_target`], then a temporary file created beside it (its folder made if missing,
+/// as writing it will) and removed at once. The final name is never touched. A folder that
+/// takes no files (`/proc`, one read-only or full of inodes) is refused here, not when the
+/// run's figures are to be written.
+///
+/// # Errors
+/// [`OutputError`] from the check or the creation.
+pub fn check_writable(path: &Path, force: bool) -> Result<(), OutputError> {
+    let (pending, _file) = PendingFile::create(path, force)?;
+    drop(pending); // removes the probe
+    Ok(())
+}
+
 /// A temporary file beside its final name, moved into place by [`PendingFile::commit`]
 /// and removed if dropped uncommitted.
 #[derive(Debug)]

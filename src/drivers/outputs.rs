@@ -143,7 +143,7 @@ pub fn check_out(a: &Outputs, graph: &GraphSpec, speech: Speech) -> anyhow::Resu
         // Refuse before the run, not after it: the outputs will not be writable.
         let estimator = graph.estimate_topic().map(|_| ESTIMATOR_JSON);
         for name in OUT_FILES.into_iter().chain(estimator) {
-            ratelab_core::output::check_target(&dir.join(name), a.force)?;
+            ratelab_core::output::check_writable(&dir.join(name), a.force)?;
         }
     }
     Ok(())

@@ -58,9 +58,7 @@ pub(super) fn first_free(dir: &Path, stem: &str) -> PathBuf {
 /// # Errors
 /// [`RecordingError`] naming the problem.
 pub fn check_output_path(path: &Path, force: bool) -> Result<(), RecordingError> {
-    let (pending, _file) = ratelab_core::output::PendingFile::create(path, force)?;
-    drop(pending); // removes the probe
-    Ok(())
+    Ok(ratelab_core::output::check_writable(path, force)?)
 }
 
 /// Moves a recording's temporary file into place once, when finished or dropped.

@@ -211,14 +211,15 @@ impl Bag {
     ///
     /// # Errors
     /// [`Ros2Error::Usage`]: `dir` exists and is not a folder, or holds a bag (either file)
-    /// and `force` is false, or one of them is a link or not a regular file.
+    /// and `force` is false, one of them is a link or not a regular file, or no file can be
+    /// created there ([`ratelab_core::output::check_writable`]; the folder is made).
     pub fn check(dir: &Path, force: bool) -> Result<(), Ros2Error> {
         if dir.exists() && !dir.is_dir() {
             return Err(io(dir, "exists and is not a folder"));
         }
         let (mcap, meta) = Bag::files(dir);
         for p in [&mcap, &meta] {
-            ratelab_core::output::check_target(p, force).map_err(|e| io(p, e))?;
+            ratelab_core::output::check_writable(p, force).map_err(|e| io(p, e))?;
         }
         Ok(())
     }

@@ -1037,6 +1037,42 @@ fn outputs_never_write_through_links_into_fifos_or_over_files() {
     assert!(!o.stdout.contains("BALANCED"), "the run went ahead: {o:?}");
     assert!(!logged.join("metrics.json").exists());
     assert_eq!(std::fs::read(logged.join("log.txt")).unwrap(), b"precious");
+    // A folder that takes no files (root is not stopped by permission bits; /proc is):
+    // refused before the run, not once its figures are to be written.
+    let o = run_child(
+        &["run", "--smoke", "--out", "/proc"],
+        d,
+        Duration::from_secs(30),
+        |_| {},
+    );
+    assert_eq!(o.code, Some(2), "{o:?}");
+    assert!(
+        o.stderr.contains("cannot write /proc/metrics.json"),
+        "{o:?}"
+    );
+    assert!(!o.stdout.contains("BALANCED"), "the run went ahead: {o:?}");
+    let o = run_child(
+        &[
+            "sweep",
+            "--control-hz",
+            "50",
+            "--seeds",
+            "0",
+            "--duration",
+            "0.1",
+            "--csv",
+            "/proc/ratelab-sweep.csv",
+        ],
+        d,
+        Duration::from_secs(30),
+        |_| {},
+    );
+    assert_eq!(o.code, Some(2), "{o:?}");
+    assert!(
+        o.stderr.contains("cannot write /proc/ratelab-sweep.csv"),
+        "{o:?}"
+    );
+    assert!(!o.stdout.contains("balanced"), "the sweep ran: {o:?}");
     // sweep --csv over an existing file.
     assert_refused(
         &[
