@@ -14,6 +14,12 @@ use std::time::Instant;
 /// The highest rate ratelab accepts, in Hz.
 pub const MAX_HZ: f64 = 10_000.0;
 
+/// The lowest rate ratelab accepts, in Hz: one tick in the longest run
+/// ([`crate::limits::MAX_DURATION_S`], ten years, about 3.17e-9 Hz). Slower, a period would
+/// not tick within any run, and past about 5.4e-11 Hz it would not fit its `u64`
+/// nanoseconds (1e-300 Hz is a period of 1e309 s).
+pub const MIN_HZ: f64 = 1.0 / crate::limits::MAX_DURATION_S;
+
 /// The default spin margin: sleep to this long before a deadline, then spin.
 pub const DEFAULT_SPIN_MARGIN: Nanos = Nanos(300_000);
 
@@ -27,18 +33,34 @@ pub const STOP_POLL: std::time::Duration = std::time::Duration::from_millis(10);
 
 /// A rate that cannot be used.
 #[derive(Debug, thiserror::Error, PartialEq)]
-#[error("rate must be a finite number in (0, {max}] Hz, got {hz}", max = MAX_HZ)]
+#[error("rate {}", rate_rule(*hz))]
 pub struct InvalidRate {
     /// The rejected value, in Hz.
     pub hz: f64,
 }
 
+/// Why `hz` is refused as a rate, as a refusal says it after the setting's name, the value
+/// short ([`crate::text::number`]): `must be a finite rate in (0, 10000] Hz, got 0`, or for
+/// a positive rate below [`MIN_HZ`] `must be at least 3.171e-9 Hz, one tick in the longest
+/// run (…), got 1e-300`.
+pub fn rate_rule(hz: f64) -> String {
+    let got = crate::text::number(hz);
+    if hz > 0.0 && hz < MIN_HZ {
+        format!(
+            "must be at least {MIN_HZ:.3e} Hz, one tick in the longest run ({} s, ratelab::limits::MAX_DURATION_S), got {got}",
+            crate::limits::MAX_DURATION_S
+        )
+    } else {
+        format!("must be a finite rate in (0, {MAX_HZ}] Hz, got {got}")
+    }
+}
+
 /// The period of a rate: `round(1e9 / hz)` nanoseconds.
 ///
 /// # Errors
-/// [`InvalidRate`] when `hz` is not finite or not in (0, [`MAX_HZ`]].
+/// [`InvalidRate`] when `hz` is not finite or not in [[`MIN_HZ`], [`MAX_HZ`]].
 pub fn period_for_hz(hz: f64) -> Result<Nanos, InvalidRate> {
-    if hz.is_finite() && hz > 0.0 && hz <= MAX_HZ {
+    if hz.is_finite() && hz >= MIN_HZ && hz <= MAX_HZ {
         Ok(Nanos((1e9 / hz).round() as u64))
     } else {
         Err(InvalidRate { hz })
@@ -194,9 +216,27 @@ mod tests {
 
     #[test]
     fn bad_rates_are_rejected() {
-        for hz in [0.0, -5.0, f64::NAN, f64::INFINITY, 10_000.5] {
+        for hz in [0.0, -5.0, f64::NAN, f64::INFINITY, 10_000.5, 1e-300, 3e-9] {
             assert!(period_for_hz(hz).is_err(), "{hz}");
         }
+        // The slowest: one tick in the longest run, its period in range.
+        let slowest = period_for_hz(MIN_HZ).unwrap();
+        assert_eq!(slowest.0, 315_360_000_000_000_000);
+        assert!(period_for_hz(MIN_HZ * 1.001).is_ok());
+    }
+
+    #[test]
+    fn a_refused_rate_says_its_range_with_the_value_short() {
+        assert_eq!(
+            InvalidRate { hz: 0.0 }.to_string(),
+            "rate must be a finite rate in (0, 10000] Hz, got 0"
+        );
+        assert_eq!(
+            rate_rule(1e-300),
+            "must be at least 3.171e-9 Hz, one tick in the longest run (315360000 s, ratelab::limits::MAX_DURATION_S), got 1e-300"
+        );
+        assert!(rate_rule(1e300).ends_with("(0, 10000] Hz, got 1e300"));
+        assert!(rate_rule(-1e-300).ends_with("(0, 10000] Hz, got -1e-300"));
     }
 
     #[test]

@@ -2,7 +2,7 @@
 
 use crate::graph::spec::{GraphSpec, OverrideError};
 use crate::setting::{Setting, Speech};
-use ratelab_core::rate::{period_for_hz, MAX_HZ};
+use ratelab_core::rate::period_for_hz;
 use ratelab_core::time::{Nanos, MAX_DURATION_S};
 
 pub use ratelab_core::clock::ClockKind;
@@ -97,8 +97,7 @@ impl ConfigError {
                     other if speech == Speech::Keywords => other.replace('-', "_"),
                     other => format!("--{other}"),
                 };
-                let hz = ratelab_core::text::number(*hz);
-                format!("{named} must be a finite rate in (0, {MAX_HZ}] Hz, got {hz}")
+                format!("{named} {}", ratelab_core::rate::rate_rule(*hz))
             }
             ConfigError::Depth(d) => {
                 format!("{} must be at least 1, got {d}", name(Setting::QueueDepth))
@@ -106,8 +105,9 @@ impl ConfigError {
             ConfigError::QueueDepth(e) => format!("{}: {e}", name(Setting::QueueDepth)),
             ConfigError::Graph(e) => e.to_string(),
             ConfigError::Duration(s) => format!(
-                "{} must be in (0, {MAX_DURATION_S}] seconds, got {s} (ratelab::limits::MAX_DURATION_S)",
-                name(Setting::Duration)
+                "{} must be in (0, {MAX_DURATION_S}] seconds, got {} (ratelab::limits::MAX_DURATION_S)",
+                name(Setting::Duration),
+                ratelab_core::text::number(*s)
             ),
             ConfigError::Clock(c) => {
                 format!("{} must be 'real' or 'virtual', got '{c}'", name(Setting::Clock))

@@ -428,6 +428,17 @@ fn a_number_that_looks_like_a_flag_is_judged_by_its_rule() {
             "--sensor-hz must be a finite rate in (0, 10000]",
         ),
         ("--duration", "-inf", "-inf"),
+        // Too slow to tick in any run, and too long to echo in full.
+        (
+            "--control-hz",
+            "1e-300",
+            "--control-hz must be at least 3.171e-9 Hz, one tick in the longest run (315360000 s, ratelab::limits::MAX_DURATION_S), got 1e-300",
+        ),
+        (
+            "--duration",
+            "1e300",
+            "--duration must be in (0, 315360000] seconds, got 1e300 (ratelab::limits::MAX_DURATION_S)",
+        ),
     ] {
         let o = limited(&["run", flag, value], WITHIN, |_| {});
         let lines: Vec<&str> = o.stderr.trim_end().lines().collect();

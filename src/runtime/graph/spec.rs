@@ -93,7 +93,7 @@ use ratelab_core::executor::ComputeTime;
 use ratelab_core::qos::{
     self, Delivery, History, Link, OnDeadlineMissed, Reliability, TopicQos, MAX_DEPTH,
 };
-use ratelab_core::rate::{period_for_hz, MAX_HZ};
+use ratelab_core::rate::period_for_hz;
 use ratelab_core::time::Nanos;
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -452,10 +452,9 @@ impl Ctx<'_> {
 }
 
 fn check_rate_hz(hz: f64) -> Result<(), String> {
-    period_for_hz(hz).map(|_| ()).map_err(|_| {
-        let hz = ratelab_core::text::number(hz);
-        format!("rate_hz must be a finite rate in (0, {MAX_HZ}] Hz, got {hz}")
-    })
+    period_for_hz(hz)
+        .map(|_| ())
+        .map_err(|_| format!("rate_hz {}", ratelab_core::rate::rate_rule(hz)))
 }
 
 fn check_actuator_rate(hz: f64) -> Result<(), String> {

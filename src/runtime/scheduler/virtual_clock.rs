@@ -698,9 +698,10 @@ mod tests {
 
     #[test]
     fn the_slowest_rate_never_overflows_run_time() {
-        // 1e-300 Hz: a period past u64 nanoseconds, saturated to "never".
+        // The slowest rate a run takes: one tick in the longest run (slower is refused,
+        // `ratelab_core::rate::MIN_HZ`), its next deadline past this run's end.
         let log = Arc::new(Mutex::new(Vec::new()));
-        let mut nodes = probes(&log, [50.0, 1e-300, 50.0]);
+        let mut nodes = probes(&log, [50.0, ratelab_core::rate::MIN_HZ, 50.0]);
         let mut sched = VirtualScheduler::new(&nodes);
         let end = sched.run(&mut nodes, Nanos::SECOND, &StopFlag::new(), &mut |_| {});
         assert_eq!(end.reason, EndReason::Duration);
