@@ -60,7 +60,7 @@ pub fn rate_rule(hz: f64) -> String {
 /// # Errors
 /// [`InvalidRate`] when `hz` is not finite or not in [[`MIN_HZ`], [`MAX_HZ`]].
 pub fn period_for_hz(hz: f64) -> Result<Nanos, InvalidRate> {
-    if hz.is_finite() && hz >= MIN_HZ && hz <= MAX_HZ {
+    if (MIN_HZ..=MAX_HZ).contains(&hz) {
         Ok(Nanos((1e9 / hz).round() as u64))
     } else {
         Err(InvalidRate { hz })
