@@ -127,6 +127,11 @@ fn to_py(e: &anyhow::Error) -> PyErr {
                 );
                 return PyFileExistsError::new_err(text.replace(&o.to_string(), &said));
             }
+            // The file system refused (`out="/proc"`, a full or read-only disk), as a
+            // recording's refusal is said: not a setting.
+            if let ratelab::output::OutputError::Io { .. } = o {
+                return PyOSError::new_err(text);
+            }
         }
         if let Some(io) = cause.downcast_ref::<std::io::Error>() {
             match io.kind() {

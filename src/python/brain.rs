@@ -152,17 +152,24 @@ fn read_script_file(script: &str) -> Result<String, PythonError> {
         ratelab_core::input::read_regular_file(std::path::Path::new(script), MAX_SCRIPT_BYTES)
             .map_err(|e| {
                 let line = format!("cannot read Python script {e}");
-                PythonError::Input(match e {
+                let line = match e {
                     ratelab_core::input::InputError::TooLarge { .. } => {
                         ratelab_core::limits::refusal(line, "MAX_SCRIPT_BYTES")
                     }
                     _ => line,
-                })
+                };
+                PythonError::Input {
+                    line,
+                    missing: matches!(e, ratelab_core::input::InputError::NotFound(_)),
+                }
             })?;
     String::from_utf8(bytes).map_err(|e| {
         let upto = &e.as_bytes()[..e.utf8_error().valid_up_to()];
         let line = upto.iter().filter(|b| **b == b'\n').count() + 1;
-        PythonError::Input(format!("{script}:{line}: not UTF-8 text"))
+        PythonError::Input {
+            line: format!("{script}:{line}: not UTF-8 text"),
+            missing: false,
+        }
     })
 }
 

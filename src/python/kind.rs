@@ -6,7 +6,7 @@ use crate::node::PythonNode;
 use ratelab_core::ports::{AnyPorts, RustNode};
 use ratelab_core::rate::Rate;
 use ratelab_core::time::Nanos;
-use ratelab_runtime::graph::interpreter::Interpreter;
+use ratelab_runtime::graph::interpreter::{BrainLoadError, Interpreter};
 use ratelab_runtime::graph::kind::{BuildContext, NodeOf, PythonCode};
 use ratelab_runtime::policy::Policy;
 
@@ -20,10 +20,12 @@ impl Interpreter for Embedded {
         NodeOf::bind(cx, Python { node, rate })
     }
 
-    fn brain(&self, script: &str, function: &str) -> Result<Box<dyn Policy>, String> {
-        Ok(Box::new(
-            PythonBrain::load(script, function).map_err(|e| e.to_string())?,
-        ))
+    fn brain(&self, script: &str, function: &str) -> Result<Box<dyn Policy>, BrainLoadError> {
+        let brain = PythonBrain::load(script, function).map_err(|e| BrainLoadError {
+            missing: matches!(e, crate::PythonError::Input { missing: true, .. }),
+            line: e.to_string(),
+        })?;
+        Ok(Box::new(brain))
     }
 
     fn enter_trial(&self) -> u64 {

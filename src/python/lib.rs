@@ -72,9 +72,16 @@ pub enum PythonError {
     /// The interpreter could not start or lacks a module ratelab needs (NumPy).
     #[error("{0}")]
     Interpreter(String),
-    /// The script could not be read (missing, not a file, too large, not UTF-8).
-    #[error("{0}")]
-    Input(String),
+    /// The script could not be read (missing, not a file, too large, not UTF-8): the line,
+    /// and whether the file is not there (told apart as a missing checkpoint is, Python's
+    /// `FileNotFoundError`).
+    #[error("{line}")]
+    Input {
+        /// The one line.
+        line: String,
+        /// The file is not there.
+        missing: bool,
+    },
     /// The script failed to load: a syntax error, an exception at import, a broken contract
     /// (`FILE:LINE: ExceptionType: message`).
     #[error("{0}")]

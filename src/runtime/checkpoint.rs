@@ -188,9 +188,11 @@ pub fn load_policy(spec: &str) -> Result<Box<dyn Policy>, PolicyError> {
         return Ok(Box::new(Scripted));
     }
     if let Some((script, function)) = crate::graph::interpreter::parse_spec(spec) {
-        return crate::graph::interpreter::installed()
-            .and_then(|python| python.brain(script, function))
-            .map_err(PolicyError::Python);
+        let python = crate::graph::interpreter::installed().map_err(PolicyError::Python)?;
+        return python.brain(script, function).map_err(|e| match e.missing {
+            true => PolicyError::NotFound(PathBuf::from(script)),
+            false => PolicyError::Python(e.line),
+        });
     }
     let brain = load_checkpoint(spec)?;
     Ok(match caption(Path::new(spec)) {

@@ -166,6 +166,10 @@ def test_bad_input_is_an_exception_with_the_one_line():
     assert "no-such-graph.toml" in str(e.value)
     with pytest.raises(FileNotFoundError):
         ratelab.run(policy="no-such-checkpoint.pt")
+    # A brain's script that is not there is a missing file too, as a checkpoint is.
+    with pytest.raises(FileNotFoundError) as e:
+        ratelab.run(policy="no-such-brain.py", **VIRTUAL)
+    assert str(e.value) == "policy file not found: no-such-brain.py", str(e.value)
 
 
 def test_a_trace_too_large_to_hold_is_refused_before_the_run():
@@ -191,6 +195,19 @@ def test_an_output_is_not_replaced_without_force(tmp_path):
     # The Python parameter, not the command line's flag.
     assert "force" in str(e.value) and "--force" not in str(e.value), str(e.value)
     ratelab.run(duration_s=0.5, out=tmp_path, force=True, **VIRTUAL)
+
+
+def test_an_output_folder_that_takes_no_files_is_the_system_s_refusal_before_the_run():
+    # /proc takes no files, whoever runs this: an OSError, as a recording there is, and
+    # before the run (a long run's figures were lost after it).
+    started = time.monotonic()
+    for kw in [{"out": "/proc"}, {"record": "/proc/ratelab-run.rrd"}]:
+        with pytest.raises(OSError) as e:
+            # A run of minutes, were it to go ahead.
+            ratelab.run(duration_s=100000.0, trace_every=10000, **kw, **VIRTUAL)
+        assert not isinstance(e.value, ratelab.SettingError), (kw, e.value)
+        assert "/proc" in str(e.value) and "\n" not in str(e.value), str(e.value)
+    assert time.monotonic() - started < 30.0, "the runs went ahead"
 
 
 def test_a_fault_after_the_run_s_end_warns_in_python_s_words_and_is_not_summed_up():

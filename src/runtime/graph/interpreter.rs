@@ -20,6 +20,19 @@ pub const DEFAULT_FUNCTION: &str = "act";
 pub const NOT_INSTALLED: &str =
     "Python nodes and brains need ratelab's Python layer: call ratelab::init() first (the command line does)";
 
+/// Why a Python brain cannot be loaded ([`Interpreter::brain`]): the one line, and whether
+/// it is because the script is not there (`missing`), which a front end tells apart as a
+/// checkpoint's missing file is (`crate::checkpoint::PolicyError::NotFound`, Python's
+/// `FileNotFoundError`).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{line}")]
+pub struct BrainLoadError {
+    /// The one-line reason.
+    pub line: String,
+    /// The script is not there.
+    pub missing: bool,
+}
+
 /// Runs a learner's Python: implemented by the Python layer (`ratelab_python`).
 pub trait Interpreter: Send + Sync {
     /// The work of node `cx.name` of kind `python`, running `code`.
@@ -32,8 +45,9 @@ pub trait Interpreter: Send + Sync {
     /// The brain that calls `function` of `script` once per control tick.
     ///
     /// # Errors
-    /// The one-line reason it cannot be loaded.
-    fn brain(&self, script: &str, function: &str) -> Result<Box<dyn Policy>, String>;
+    /// [`BrainLoadError`]: the one-line reason it cannot be loaded, and whether the script
+    /// is not there.
+    fn brain(&self, script: &str, function: &str) -> Result<Box<dyn Policy>, BrainLoadError>;
 
     /// Mark the calling thread, for the rest of its life, as one that tries saved code
     /// beside the live run (the lab's reload on save loads the saved code, and runs its
