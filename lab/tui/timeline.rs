@@ -244,11 +244,22 @@ pub fn render(v: &TimelineView, virtual_clock: bool, area: Rect, buf: &mut Buffe
         // beside a long one stays visible); each tick's first cell in capitals.
         let mut order: Vec<&SpanView> = lane.spans.iter().collect();
         order.sort_by_key(|s| (col_of(s.end) == col_of(s.start), s.start));
+        // Whose short tick each cell shows: one run back to back with another node's in
+        // the same cell (a single-threaded executor's ticks due at one instant) goes in
+        // the next cell when that is free, in the order they ran, rather than under it.
+        let mut shown: Vec<Option<usize>> = vec![None; usize::from(cols)];
         for s in order {
             if s.end < v.t0 {
                 continue;
             }
-            let (a, b) = (col_of(s.start.max(v.t0)), col_of(s.end));
+            let (mut a, mut b) = (col_of(s.start.max(v.t0)), col_of(s.end));
+            if a == b {
+                let taken = |x: u16| shown[usize::from(x)].is_some_and(|n| n != s.node);
+                if taken(a) && a + 1 < cols && !taken(a + 1) {
+                    (a, b) = (a + 1, a + 1);
+                }
+                shown[usize::from(a)] = Some(s.node);
+            }
             let color = PALETTE[s.node % PALETTE.len()];
             let style = if s.late {
                 Style::new().fg(Color::White).bg(Color::Red)
@@ -393,6 +404,27 @@ mod tests {
         assert!(text.contains("main#1"), "{text}");
         assert!(text.contains("Ppppp"), "{text}");
         assert!(text.contains("0.00 s") && text.contains("1.00 s"), "{text}");
+        // Ticks that take no time, due at one instant on a single thread (the virtual
+        // clock without compute times): each node's letter is seen, side by side in the
+        // order they ran, not the last over the first.
+        let sensor = g.node_id("sensor").unwrap().0;
+        let mut t = Timeline::default();
+        for k in 0..50 {
+            let at = k * 20;
+            t.push(span(sensor, at, at, at), now);
+            t.push(span(policy, at, at, at), now);
+        }
+        let v = t.view(&g, &plan, &[50.0; 3], now);
+        let mut buf = Buffer::empty(Rect::new(0, 0, 120, 8));
+        render(&v, true, buf.area, &mut buf);
+        let text = crate::tui::buffer_text(&buf);
+        let row = text.lines().find(|l| l.contains("main#1")).unwrap();
+        assert!(row.contains("SP"), "{text}");
+        assert_eq!(
+            row.matches('S').count(),
+            row.matches('P').count(),
+            "as many of each: {row}"
+        );
         // Nothing heard of under the virtual clock: why.
         let empty = Timeline::default().view(&g, &plan, &[50.0; 3], now);
         let mut buf = Buffer::empty(Rect::new(0, 0, 60, 8));
