@@ -467,7 +467,10 @@ fn check_actuator_rate(hz: f64) -> Result<(), String> {
     }
 }
 
-fn check_depth(depth: i64) -> Result<usize, String> {
+/// A history depth in 1..=[`MAX_DEPTH`], any whole number given (a graph file's `i64`, a
+/// flag's `usize`) said as given when refused.
+fn check_depth(depth: impl Into<i128>) -> Result<usize, String> {
+    let depth: i128 = depth.into();
     match usize::try_from(depth) {
         Ok(d) if (1..=MAX_DEPTH).contains(&d) => Ok(d),
         _ => Err(format!("depth must be in 1..={MAX_DEPTH}, got {depth}")),
@@ -837,7 +840,7 @@ impl GraphSpec {
     /// changes).
     pub fn set_depth(&mut self, name: &str, depth: usize) -> Result<(), OverrideError> {
         let id = self.known_topic(name)?;
-        let d = check_depth(i64::try_from(depth).unwrap_or(i64::MAX))
+        let d = check_depth(u64::try_from(depth).unwrap_or(u64::MAX))
             .map_err(|e| OverrideError(format!("topic '{name}': {e}")))?;
         let was = std::mem::replace(&mut self.topics[id.0].depth, d);
         if d > was {
@@ -857,7 +860,7 @@ impl GraphSpec {
     /// its line naming no setting (`depth must be in 1..=1000000, got 0`): the caller names
     /// the one it was given as (`--queue-depth`, `queue_depth`).
     pub fn set_all_depths(&mut self, depth: usize) -> Result<(), OverrideError> {
-        check_depth(i64::try_from(depth).unwrap_or(i64::MAX)).map_err(OverrideError)?;
+        check_depth(u64::try_from(depth).unwrap_or(u64::MAX)).map_err(OverrideError)?;
         let was: Vec<usize> = self
             .topics
             .iter_mut()
@@ -1446,5 +1449,14 @@ depth = 1
         assert_eq!(g.queue_depth(), Some(100));
         assert!(g.set_depth("/obs", 0).is_err());
         assert!(g.set_depth("/nope", 1).is_err());
+        // A depth past i64 is said as given, not clamped.
+        assert_eq!(
+            g.set_depth("/obs", 1 << 63).unwrap_err().0,
+            "topic '/obs': depth must be in 1..=1000000, got 9223372036854775808"
+        );
+        assert_eq!(
+            g.set_all_depths(usize::MAX).unwrap_err().0,
+            "depth must be in 1..=1000000, got 18446744073709551615"
+        );
     }
 }
