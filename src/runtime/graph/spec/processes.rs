@@ -11,7 +11,8 @@
 //! `Restart=on-failure` with a start limit, or dora-rs's `restart_policy`); it rejoins the
 //! run on the same clock. Under the virtual clock a process cannot rejoin a lockstep, so
 //! the run ends as without it (the launcher says so). Rules (a [`SpecError`] at the
-//! culprit): the table's name is a process of the graph's placement.
+//! culprit): the table's name is a process of the graph's placement, and the plant's
+//! process (the actuator's) is never started again: its state goes with it.
 
 use super::{Ctx, GraphSpec, SpecError};
 use serde::{Deserialize, Serialize};
@@ -63,6 +64,15 @@ pub(super) fn processes(
         }
         if let Some(r) = &p.get_ref().restart {
             if *r.get_ref() != RestartPolicy::Never {
+                // The plant's state lives in its process: gone, the run ends with it.
+                if *name == spec.process_of(spec.actuator) {
+                    return Err(cx.err(
+                        r.span(),
+                        format!(
+                            "[processes.{name:?}]: restart = \"on-failure\" cannot be: '{name}' runs the plant (the actuator), whose state goes with its process; when it goes the run ends"
+                        ),
+                    ));
+                }
                 out.insert(name.clone(), *r.get_ref());
             }
         }
@@ -124,6 +134,15 @@ mod tests {
         assert!(e.starts_with("g.toml:"), "{e}");
         let e = with("[processes.policy]\nrestart = \"always\"").unwrap_err();
         assert!(e.contains("unknown variant `always`"), "{e}");
+        // The plant's process cannot be started again: refused at its value.
+        let e = with("[processes.robot]\nrestart = \"on-failure\"").unwrap_err();
+        assert!(
+            e.contains(
+                "[processes.\"robot\"]: restart = \"on-failure\" cannot be: 'robot' runs the plant"
+            ),
+            "{e}"
+        );
+        assert!(e.starts_with("g.toml:"), "{e}");
         let e = with("[processes.policy]\nretry = 3").unwrap_err();
         assert!(e.contains("unknown field `retry`"), "{e}");
     }
