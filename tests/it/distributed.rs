@@ -1807,6 +1807,45 @@ fn a_frozen_process_is_said_silent_within_seconds_and_heard_again_when_it_resume
     assert_none_left(port, Duration::ZERO);
 }
 
+#[test]
+fn a_process_frozen_past_the_run_s_end_is_waited_for_aloud_then_given_up() {
+    let _m = crate::machine::alone();
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let (mut launcher, rx, mut lines) = ready_launch("real", "2", port, dir.path());
+    let policy = node_processes(port, "policy");
+    assert_eq!(policy.len(), 1, "{policy:?}");
+    // SAFETY: plain kill(2) on a child of our child.
+    unsafe { libc::kill(policy[0] as i32, libc::SIGSTOP) };
+    // The wait for its report is said, not passed in silence (it keeps its tokens until
+    // Zenoh's lease runs out, 10 s).
+    assert!(
+        wait_line(
+            &rx,
+            &mut lines,
+            "the run is over; waiting for the report of process(es) policy (at most",
+            15
+        ),
+        "{lines:?}"
+    );
+    let status = exit_within(&mut launcher, 40);
+    lines.extend(rx.try_iter());
+    assert_eq!(status.code(), Some(2), "{lines:?}");
+    // Gone after the end: not "the others run on" of a run that is over.
+    assert!(
+        lines.iter().any(|l| l.contains(
+            "after the run's end (its liveliness token was withdrawn): its report will not come"
+        )),
+        "{lines:?}"
+    );
+    assert!(
+        !lines.iter().any(|l| l.contains("the others run on")),
+        "{lines:?}"
+    );
+    // Killed at once, not waited for: a frozen process never exits on its own.
+    assert_none_left(port, Duration::ZERO);
+}
+
 /// `ratelab ARGS --out DIR` succeeded: its metrics.json. `processes`: it is a launch that
 /// says it placed the graph in that many processes.
 fn metrics_of(args: &[&str], dir: &Path, processes: Option<usize>) -> String {

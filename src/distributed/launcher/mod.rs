@@ -595,7 +595,8 @@ pub fn launch(
         }
     };
     let wall = start.elapsed();
-    children.reap(Duration::from_secs(5));
+    // A process whose report never came (frozen, or gone) is not waited for.
+    children.reap(Duration::from_secs(5), |p| !reports.contains_key(p));
     let (metrics, missing) = me.conclude(&end, &mut reports, &taken_at, &carried)?;
     // In the graph's topic order, whichever process reported first.
     wires.sort_by_key(|w| spec.topics.iter().position(|t| t.name == w.topic));

@@ -170,11 +170,13 @@ impl Drop for Relays {
 pub(super) struct Children(pub(super) Vec<(String, Child)>);
 
 impl Children {
-    /// Wait up to `grace` for each to exit, then kill the rest.
-    pub(super) fn reap(&mut self, grace: Duration) {
+    /// Wait up to `grace` for each to exit, then kill the rest; those for which `given_up`
+    /// holds (the launcher has stopped waiting for their reports: a frozen process never
+    /// exits on its own) are killed at once.
+    pub(super) fn reap(&mut self, grace: Duration, given_up: impl Fn(&str) -> bool) {
         let deadline = Instant::now() + grace;
-        for (_, c) in &mut self.0 {
-            while Instant::now() < deadline {
+        for (p, c) in &mut self.0 {
+            while !given_up(p) && Instant::now() < deadline {
                 if let Ok(Some(_)) = c.try_wait() {
                     break;
                 }

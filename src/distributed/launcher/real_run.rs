@@ -86,6 +86,7 @@ impl Launch<'_> {
             run.note_gone(self, gone_rx);
             run.stop_once_ended(self);
             self.say_refusals_due();
+            run.say_waiting(self, reports);
             if let Some(m) = run.next_message(self) {
                 run.handle(self, m, reports, wires)?;
             }
@@ -149,6 +150,8 @@ struct Supervision {
     silence: Silence,
     /// Processes said to be silent.
     silent: Vec<String>,
+    /// Whether the wait for the last reports after the run's end was said.
+    said_waiting: bool,
 }
 
 impl Supervision {
@@ -169,7 +172,42 @@ impl Supervision {
             taken_at: BTreeMap::new(),
             silence: Silence::default(),
             silent: Vec::new(),
+            said_waiting: false,
         }
+    }
+
+    /// When the run ended (its duration, or how it ended: a fall, a failure, Ctrl-C), once
+    /// it has: the reports are due from then.
+    fn over_at(&self, l: &Launch) -> Option<Nanos> {
+        match &self.end {
+            Some(end) => Some(end.at),
+            None => (self.run_time() >= l.cfg.duration).then_some(l.cfg.duration),
+        }
+    }
+
+    /// A second after the run's end, the processes whose reports have not come, said once
+    /// with how long the launcher waits for them ([`REPLY_TIMEOUT`] from the end): a
+    /// frozen process keeps its tokens until Zenoh's lease runs out, and the wait would
+    /// otherwise pass without a word.
+    fn say_waiting(&mut self, l: &Launch, reports: &BTreeMap<String, GraphState>) {
+        let Some(at) = self.over_at(l) else { return };
+        if self.said_waiting || self.run_time() < at + Nanos::SECOND {
+            return;
+        }
+        let waiting: Vec<&str> = (l.names.iter())
+            .filter(|p| !reports.contains_key(*p) && !self.gone.contains(*p))
+            .map(String::as_str)
+            .collect();
+        if waiting.is_empty() {
+            return;
+        }
+        self.said_waiting = true;
+        let left = (at + Nanos::from(REPLY_TIMEOUT)).saturating_sub(self.run_time());
+        l.say(&format!(
+            "the run is over; waiting for the report of process(es) {} (at most {:.0} s more)",
+            ratelab_core::text::listed(waiting),
+            left.as_secs_f64()
+        ));
     }
 
     /// Run time now.
@@ -302,16 +340,21 @@ impl Supervision {
     /// Processes whose liveliness token went: said, and the plant's ends the run.
     fn note_gone(&mut self, l: &Launch, gone_rx: &Receiver<String>) {
         while let Ok(p) = gone_rx.try_recv() {
-            if self.end.is_some()
-                || !l.names.contains(&p)
-                || self.ended.contains(&p)
-                || self.gone.contains(&p)
-            {
+            // A process that said it ended goes once its report is taken: not news.
+            if !l.names.contains(&p) || self.ended.contains(&p) || self.gone.contains(&p) {
                 continue;
             }
             self.silence.forget(&p);
             self.silent.retain(|s| *s != p);
             self.gone.push(p.clone());
+            // After the run's end (frozen or dead before its report): not waited for more.
+            if let Some(at) = self.over_at(l) {
+                l.say(&format!(
+                    "process '{p}' is gone {:.1} s after the run's end (its liveliness token was withdrawn): its report will not come",
+                    self.run_time().saturating_sub(at).as_secs_f64()
+                ));
+                continue;
+            }
             let plant = p == l.robot;
             if plant {
                 // The plant died with it: the run cannot go on.
@@ -323,14 +366,13 @@ impl Supervision {
                     },
                 });
             }
-            let then = if plant {
-                "the run ends with it (the plant's)"
-            } else {
-                "the others run on"
-            };
             l.say(&format!(
-                "process '{p}' is gone at t={:.3}s (its liveliness token was withdrawn); {then}",
-                self.run_time().as_secs_f64()
+                "process '{p}' is gone at t={:.3}s (its liveliness token was withdrawn); {}",
+                self.run_time().as_secs_f64(),
+                match plant {
+                    true => "the run ends with it (the plant's)",
+                    false => "the others run on",
+                }
             ));
         }
     }
