@@ -30,6 +30,44 @@ pub fn printable(text: &str) -> Cow<'_, str> {
     )
 }
 
+/// A library's error message as one line a user can read: its first line, the places in
+/// the library's source it names removed (`… at /root/.cargo/registry/src/…/tcp.rs:61.`),
+/// and a message wrapped in its error's debug form (`Json5Err(Message { msg: "…", location:
+/// … })`, as Zenoh's configuration errors are) unwrapped to the message.
+pub fn library_message(msg: &str) -> String {
+    let mut line = msg.lines().next().unwrap_or("error").to_string();
+    if let Some(inner) = line.split_once("msg: \"").and_then(|(_, rest)| {
+        let mut end = None;
+        let mut escaped = false;
+        for (i, c) in rest.char_indices() {
+            match c {
+                '\\' if !escaped => escaped = true,
+                '"' if !escaped => {
+                    end = Some(i);
+                    break;
+                }
+                _ => escaped = false,
+            }
+        }
+        end.map(|e| rest[..e].replace("\\\"", "\""))
+    }) {
+        line = inner;
+    }
+    let mut from = 0;
+    while let Some(k) = line[from..].find(" at ").map(|k| k + from) {
+        let rest = &line[k + 4..];
+        let token_end = rest
+            .find(|c: char| c.is_whitespace() || c == ']')
+            .unwrap_or(rest.len());
+        if rest[..token_end].contains(".rs:") {
+            line.replace_range(k..k + 4 + token_end, "");
+        } else {
+            from = k + 4;
+        }
+    }
+    line
+}
+
 /// A number as a refusal quotes it, short: Rust's own form up to 15 digits either side of
 /// the point, scientific past them (`1e300`, not its 301 digits; `1e-12`).
 pub fn number(x: f64) -> String {
@@ -72,6 +110,30 @@ pub fn listed<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_library_message_is_one_line_without_its_source_places() {
+        let raw = "Can not create a new TCP listener bound to 127.0.0.1:7449: [Address already in use (os error 98) at /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-link-commons-1.10.2/src/tcp.rs:61.] at /root/.cargo/registry/src/x/zenoh-transport-1.10.2/src/unicast.rs:338.\nmore";
+        assert_eq!(
+            library_message(raw),
+            "Can not create a new TCP listener bound to 127.0.0.1:7449: [Address already in use (os error 98)]"
+        );
+        assert_eq!(
+            library_message("Timeout! at src/orchestrator.rs:388."),
+            "Timeout!"
+        );
+        assert_eq!(library_message("look at me"), "look at me");
+        // Zenoh's configuration error, in its debug form: the message inside.
+        let config = r#"Json5Err(Message { msg: "Endpoints must be of the form <protocol>/<address>[?<metadata>][#<config>]: garbage at /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-protocol-1.10.2/src/core/endpoint.rs:615.", location: Some(Location { line: 1, column: 2 }) }) at /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-1.10.2/src/api/config.rs:86."#;
+        assert_eq!(
+            library_message(config),
+            "Endpoints must be of the form <protocol>/<address>[?<metadata>][#<config>]: garbage"
+        );
+        assert_eq!(
+            library_message(r#"Json5Err(Message { msg: "a \"quoted\" word", location: None })"#),
+            "a \"quoted\" word"
+        );
+    }
 
     #[test]
     fn a_long_list_of_names_is_cut_saying_how_many_more() {

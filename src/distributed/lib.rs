@@ -231,22 +231,10 @@ impl From<zenoh::Error> for DistError {
 }
 
 /// A Zenoh error's first line, without the places in Zenoh's source it names (`… at
-/// /root/.cargo/registry/src/…/tcp.rs:61.`): they mean nothing to a user.
+/// /root/.cargo/registry/src/…/tcp.rs:61.`): they mean nothing to a user
+/// ([`ratelab_core::text::library_message`]).
 pub fn zenoh_message(msg: &str) -> String {
-    let mut line = msg.lines().next().unwrap_or("error").to_string();
-    let mut from = 0;
-    while let Some(k) = line[from..].find(" at ").map(|k| k + from) {
-        let rest = &line[k + 4..];
-        let token_end = rest
-            .find(|c: char| c.is_whitespace() || c == ']')
-            .unwrap_or(rest.len());
-        if rest[..token_end].contains(".rs:") {
-            line.replace_range(k..k + 4 + token_end, "");
-        } else {
-            from = k + 4;
-        }
-    }
-    line
+    ratelab_core::text::library_message(msg)
 }
 
 /// Check a Zenoh endpoint as ratelab uses them: `tls/HOST:PORT` (every link of a graph
@@ -940,20 +928,6 @@ mod tests {
         ] {
             assert_eq!(keys.process_of_node_token(other), None, "{other}");
         }
-    }
-
-    #[test]
-    fn zenoh_messages_lose_the_source_places_they_name() {
-        let raw = "Can not create a new TCP listener bound to 127.0.0.1:7449: [Address already in use (os error 98) at /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/zenoh-link-commons-1.10.2/src/tcp.rs:61.] at /root/.cargo/registry/src/x/zenoh-transport-1.10.2/src/unicast.rs:338.\nmore";
-        assert_eq!(
-            super::zenoh_message(raw),
-            "Can not create a new TCP listener bound to 127.0.0.1:7449: [Address already in use (os error 98)]"
-        );
-        assert_eq!(
-            super::zenoh_message("Timeout! at src/orchestrator.rs:388."),
-            "Timeout!"
-        );
-        assert_eq!(super::zenoh_message("look at me"), "look at me");
     }
 
     #[test]

@@ -535,8 +535,10 @@ pub fn open(
         .to_string();
     let mut config = zenoh::Config::default();
     let set = |c: &mut zenoh::Config, k: &str, v: &str| {
-        c.insert_json5(k, v)
-            .map_err(|e| Ros2Error::Usage(format!("Zenoh config {k}={v}: {e}")))
+        c.insert_json5(k, v).map_err(|e| {
+            let why = ratelab_core::text::library_message(&e.to_string());
+            Ros2Error::Usage(format!("Zenoh config {k}={v}: {why}"))
+        })
     };
     set(&mut config, "mode", "\"client\"")?;
     set(&mut config, "scouting/multicast/enabled", "false")?;

@@ -170,9 +170,10 @@ impl Ros2Session {
 }
 
 fn set(config: &mut zenoh::Config, key: &str, value: &str) -> Result<(), Ros2Error> {
-    config
-        .insert_json5(key, value)
-        .map_err(|e| Ros2Error::Usage(format!("Zenoh config {key}={value}: {e}")))
+    config.insert_json5(key, value).map_err(|e| {
+        let why = ratelab_core::text::library_message(&e.to_string());
+        Ros2Error::Usage(format!("Zenoh config {key}={value}: {why}"))
+    })
 }
 
 fn open_with(config: zenoh::Config, what: &str) -> Result<zenoh::Session, Ros2Error> {

@@ -364,6 +364,18 @@ fn no_router_or_a_bad_domain_is_said_in_one_line() {
     let (code, _, err) = ratelab(&["ros2", "--domain", "999", "node", "list"], &[]);
     assert_eq!(code, 2);
     assert!(err.contains("--domain"), "{err}");
+    // An endpoint Zenoh cannot read: Zenoh's own reason, in one line, without its error's
+    // debug form or the places in its source.
+    for endpoint in ["garbage", ""] {
+        let (code, _, err) = ratelab(&["ros2", "--connect", endpoint, "node", "list"], &[]);
+        assert_eq!(code, 2, "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(
+            err.contains("Endpoints must be of the form <protocol>/<address>"),
+            "{err}"
+        );
+        assert!(!err.contains(".rs:") && !err.contains("Json5Err"), "{err}");
+    }
 }
 
 /// Every type `echo` decodes has the RIHS01 hash rosbags computes from ROS 2's own
