@@ -360,6 +360,7 @@ impl RunSpec {
             cfg.set_control_hz(hz).map_err(said)?;
         }
         if let Some(depth) = self.queue_depth {
+            self.check_one_depth(depth, speech)?;
             cfg.set_queue_depth(depth).map_err(said)?;
         }
         cfg.phase_offsets =
@@ -406,6 +407,32 @@ impl RunSpec {
                 "{given}: graph '{}' has no node that runs a brain (kind = \"policy\"); its nodes compute their own actions",
                 graph.name
             );
+        }
+        Ok(())
+    }
+
+    /// `queue_depth` (every topic's history depth) against a depth of one topic given beside
+    /// it (`depth`, or `qos`'s `depth=`): two settings of one topic's depth that differ would
+    /// leave one of them ignored, and are refused, as two settings of one node's rate are.
+    fn check_one_depth(&self, depth: usize, speech: Speech) -> anyhow::Result<()> {
+        let qos_depths = self.graph.qos.iter().filter_map(|(topic, pairs)| {
+            let pairs = ratelab_core::qos::split_pairs(pairs).ok()?;
+            let (_, v) = pairs.into_iter().find(|(k, _)| *k == "depth")?;
+            let given = match speech {
+                Speech::Flags => format!("{} {topic}:depth={v}", Setting::Qos.flag()),
+                Speech::Keywords => speech.entry(Setting::Qos, topic, &format!("'depth={v}'")),
+            };
+            Some((topic, v.parse::<usize>().ok(), given))
+        });
+        let depths = (self.graph.depths.iter())
+            .map(|(topic, d)| (topic, Some(*d), speech.entry(Setting::Depth, topic, d)));
+        for (topic, d, given) in depths.chain(qos_depths) {
+            if d != Some(depth) {
+                anyhow::bail!(
+                    "{given} and {} ({depth}) both set the history depth of topic '{topic}'; give one",
+                    speech.name(Setting::QueueDepth)
+                );
+            }
         }
         Ok(())
     }
@@ -518,6 +545,35 @@ mod tests {
         };
         let line = long.config(Speech::Keywords).unwrap_err().to_string();
         assert!(line.starts_with("duration_s must be in (0, "), "{line}");
+    }
+
+    #[test]
+    fn queue_depth_and_a_topic_s_depth_that_differ_are_refused_as_two_settings_of_one() {
+        let mut s = RunSpec {
+            queue_depth: Some(2),
+            ..spec()
+        };
+        s.graph.depths.push(("/obs".into(), 7));
+        assert_eq!(
+            s.config(Speech::Flags).unwrap_err().to_string(),
+            "--depth /obs=7 and --queue-depth (2) both set the history depth of topic '/obs'; give one"
+        );
+        assert_eq!(
+            s.config(Speech::Keywords).unwrap_err().to_string(),
+            "depth[\"/obs\"]=7 and queue_depth (2) both set the history depth of topic '/obs'; give one"
+        );
+        // The same depth twice says one thing: taken.
+        s.graph.depths[0].1 = 2;
+        assert_eq!(s.config(Speech::Flags).unwrap().queue_depth(), Some(2));
+        // A QoS depth too.
+        s.graph.depths.clear();
+        s.graph
+            .qos
+            .push(("/action".into(), "history=keep_last,depth=5".into()));
+        assert_eq!(
+            s.config(Speech::Flags).unwrap_err().to_string(),
+            "--qos /action:depth=5 and --queue-depth (2) both set the history depth of topic '/action'; give one"
+        );
     }
 
     #[test]
