@@ -991,12 +991,14 @@ impl Recording {
     }
 
     /// Log the end of the run (an event and the summary document) at its end time, flush
-    /// the file and move it into place, so the recording is complete whichever way the run
-    /// ended.
+    /// the file, close its sink (rerun writes the file's end then) and move it into place,
+    /// so the recording is complete whichever way the run ended. Nothing is logged to it
+    /// after this.
     ///
     /// # Errors
-    /// [`RecordingError::Rerun`] when the flush fails, [`RecordingError`] when the file
-    /// cannot be moved into place (e.g. its name was taken meanwhile, without `force`).
+    /// [`RecordingError::Rerun`] when the flush fails or the file's end could not be
+    /// written (its folder takes no more writes: a full disk), [`RecordingError`] when the
+    /// file cannot be moved into place (e.g. its name was taken meanwhile, without `force`).
     pub fn finish(&self, metrics: &Metrics, end: &RunEnd) -> Result<(), RecordingError> {
         let summary = metrics.summary_lines(None);
         let level = match end.reason {
@@ -1128,6 +1130,19 @@ impl Recording {
             self.send_layout(&shape, Some((&extents, &seen, end.at)))?;
         }
         self.flush()?;
+        // The file's end (rerun's footer) is written as its sink closes, and rerun only logs a
+        // failure there: close it now, before the file takes its name, and look whether its
+        // folder still takes a write (a disk that filled cut the end short, and the
+        // recording must not be said written whole).
+        self.rec.disconnect();
+        if let Some(why) = self.path.parent().and_then(writing_beside_fails) {
+            return Err(RecordingError::Rerun {
+                path: self.path.clone(),
+                detail: format!(
+                    "its end could not be written ({why}): cut short, what was written is kept and opens as a recording cut short"
+                ),
+            });
+        }
         Ok(self.file.commit()?)
     }
 

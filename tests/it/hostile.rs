@@ -1145,6 +1145,69 @@ fn a_recording_never_replaces_an_existing_file_unless_forced() {
     );
 }
 
+/// A tmpfs of `size` mounted at a new folder `small` in `dir`, unmounted when dropped;
+/// `None` where this user cannot mount one (not root), which `RATELAB_REQUIRE_TMPFS` (set
+/// by CI where it can) turns into a failure.
+fn small_disk(dir: &Path, size: &str) -> Option<impl Drop + AsRef<Path>> {
+    struct Mounted(PathBuf);
+    impl Drop for Mounted {
+        fn drop(&mut self) {
+            let _ = Command::new("umount").arg(&self.0).status();
+        }
+    }
+    impl AsRef<Path> for Mounted {
+        fn as_ref(&self) -> &Path {
+            &self.0
+        }
+    }
+    let small = dir.join("small");
+    std::fs::create_dir(&small).unwrap();
+    let mounted = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
+        .arg(&small)
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    assert!(
+        mounted || std::env::var_os("RATELAB_REQUIRE_TMPFS").is_none(),
+        "RATELAB_REQUIRE_TMPFS is set but a tmpfs cannot be mounted"
+    );
+    mounted.then_some(Mounted(small))
+}
+
+#[test]
+fn a_recording_whose_disk_fills_at_its_end_is_said_cut_short_not_written() {
+    let dir = tempfile::tempdir().unwrap();
+    // 300 KiB: a 2 s recording's 540 KB does not fit, most of it does.
+    let Some(small) = small_disk(dir.path(), "300k") else {
+        eprintln!("not checked: a tmpfs cannot be mounted here (root only)");
+        return;
+    };
+    let rrd = small.as_ref().join("r.rrd");
+    let o = run_child(
+        &[
+            "run",
+            "--clock",
+            "virtual",
+            "--duration",
+            "2",
+            "--record",
+            rrd.to_str().unwrap(),
+        ],
+        dir.path(),
+        Duration::from_secs(60),
+        |_| {},
+    );
+    assert!(!o.timed_out, "{o:?}");
+    assert_eq!(o.code, Some(2), "said written whole: {o:?}");
+    assert!(
+        o.stderr.contains("No space left on device") && o.stderr.contains("cut short"),
+        "{o:?}"
+    );
+    assert!(!o.stdout.contains("open it with"), "{o:?}");
+    assert_eq!(o.stderr.trim().lines().count(), 1, "{o:?}");
+}
+
 // ---------------------------------------------------------------------------------------
 // Rates, durations, signals, error lines
 
