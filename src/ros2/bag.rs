@@ -246,38 +246,29 @@ impl Bag {
             .create_new(true)
             .open(&mcap_path)
             .map_err(|e| io(&mcap_path, e))?;
-        let mut writer = mcap::WriteOptions::new()
+        // mcap 0.25's writer panics when dropped after a failed write (its `finish` expects
+        // the chunk the failed write took): until the bag is made, a writer that failed is
+        // not dropped but forgotten (its file, and the rest of this process's life, hold
+        // one descriptor), and its file removed: one line, nothing left.
+        let made = mcap::WriteOptions::new()
             .profile("ros2")
             .library("ratelab")
             .create(BufWriter::new(file))
-            .map_err(|e| io(&mcap_path, e))?;
-        let mut counted = Vec::new();
-        let mut schemas: BTreeMap<&str, u16> = BTreeMap::new();
-        for t in topics {
-            let type_name = t.description.type_description.type_name.as_str();
-            let schema_id = match schemas.get(type_name) {
-                Some(id) => *id,
-                None => {
-                    let id = writer
-                        .add_schema(type_name, "ros2msg", schema(t.description).as_bytes())
-                        .map_err(|e| io(&mcap_path, e))?;
-                    schemas.insert(type_name, id);
-                    id
-                }
-            };
-            let qos: Vec<QosYaml> = t.qos.iter().map(QosYaml::of).collect();
-            let channel = writer
-                .add_channel(schema_id, t.name, "cdr", &channel_metadata(&qos, &t.hash))
-                .map_err(|e| io(&mcap_path, e))?;
-            counted.push(Counted {
-                name: t.name.to_string(),
-                type_name: type_name.to_string(),
-                hash: t.hash.clone(),
-                qos,
-                channel,
-                count: 0,
-            });
-        }
+            .map_err(|e| io(&mcap_path, e))
+            .map(std::mem::ManuallyDrop::new)
+            .and_then(
+                |mut writer| match Bag::declare(&mut writer, topics, &mcap_path) {
+                    Ok(counted) => Ok((std::mem::ManuallyDrop::into_inner(writer), counted)),
+                    Err(e) => Err(e),
+                },
+            );
+        let (writer, counted) = match made {
+            Ok(made) => made,
+            Err(e) => {
+                let _ = std::fs::remove_file(&mcap_path);
+                return Err(e);
+            }
+        };
         Ok(Bag {
             writer,
             dir: dir.to_path_buf(),
@@ -287,6 +278,46 @@ impl Bag {
             last_ns: 0,
             failed: None,
         })
+    }
+
+    /// Declare `topics` in `writer` (a schema per type, a channel per topic, with its QoS
+    /// and type hash): what each is counted as.
+    ///
+    /// # Errors
+    /// [`Ros2Error`] naming `mcap_path` when a record cannot be written.
+    fn declare(
+        writer: &mut mcap::Writer<BufWriter<std::fs::File>>,
+        topics: &[BagTopic<'_>],
+        mcap_path: &Path,
+    ) -> Result<Vec<Counted>, Ros2Error> {
+        let mut counted = Vec::new();
+        let mut schemas: BTreeMap<&str, u16> = BTreeMap::new();
+        for t in topics {
+            let type_name = t.description.type_description.type_name.as_str();
+            let schema_id = match schemas.get(type_name) {
+                Some(id) => *id,
+                None => {
+                    let id = writer
+                        .add_schema(type_name, "ros2msg", schema(t.description).as_bytes())
+                        .map_err(|e| io(mcap_path, e))?;
+                    schemas.insert(type_name, id);
+                    id
+                }
+            };
+            let qos: Vec<QosYaml> = t.qos.iter().map(QosYaml::of).collect();
+            let channel = writer
+                .add_channel(schema_id, t.name, "cdr", &channel_metadata(&qos, &t.hash))
+                .map_err(|e| io(mcap_path, e))?;
+            counted.push(Counted {
+                name: t.name.to_string(),
+                type_name: type_name.to_string(),
+                hash: t.hash.clone(),
+                qos,
+                channel,
+                count: 0,
+            });
+        }
+        Ok(counted)
     }
 
     /// Write message `data` (CDR with its header) of topic number `topic` at run time

@@ -1208,6 +1208,38 @@ fn a_recording_whose_disk_fills_at_its_end_is_said_cut_short_not_written() {
     assert_eq!(o.stderr.trim().lines().count(), 1, "{o:?}");
 }
 
+#[test]
+fn a_bag_on_a_full_disk_is_one_line_and_leaves_no_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(small) = small_disk(dir.path(), "64k") else {
+        eprintln!("not checked: a tmpfs cannot be mounted here (root only)");
+        return;
+    };
+    std::fs::write(small.as_ref().join("fill"), vec![0u8; 64 * 1024]).ok();
+    let bag = small.as_ref().join("b");
+    let o = run_child(
+        &[
+            "run",
+            "--clock",
+            "virtual",
+            "--duration",
+            "2",
+            "--ros2",
+            "87",
+            "--bag",
+            bag.to_str().unwrap(),
+        ],
+        dir.path(),
+        Duration::from_secs(60),
+        |_| {},
+    );
+    assert_eq!(o.code, Some(2), "{o:?}");
+    assert!(!o.stderr.contains("panicked"), "{o:?}");
+    assert_eq!(o.stderr.trim().lines().count(), 1, "{o:?}");
+    assert!(o.stderr.contains("--bag"), "{o:?}");
+    assert!(!bag.join("b_0.mcap").exists(), "an empty bag file left");
+}
+
 // ---------------------------------------------------------------------------------------
 // Rates, durations, signals, error lines
 
