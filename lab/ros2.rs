@@ -24,6 +24,11 @@ pub struct Ros2Args {
     /// How long to wait for the graph's liveliness tokens, seconds.
     #[arg(long, global = true, default_value_t = 1.0, value_name = "S")]
     pub wait: f64,
+    /// ros2cli's `--no-daemon`, taken so that ros2 commands and scripts carry over as they
+    /// are: ratelab never uses a daemon (each command reads the graph itself), so it changes
+    /// nothing.
+    #[arg(long, global = true)]
+    pub no_daemon: bool,
     /// What to read.
     #[command(subcommand)]
     pub what: Ros2Command,

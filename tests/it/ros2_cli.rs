@@ -361,6 +361,20 @@ fn no_router_or_a_bad_domain_is_said_in_one_line() {
         "{err}"
     );
     assert_eq!(err.trim().lines().count(), 1, "{err}");
+    // ros2cli's --no-daemon (in every ros2 script) is taken, after the verb as ros2 takes it.
+    let (code, _, err) = ratelab(
+        &[
+            "ros2",
+            "--connect",
+            &endpoint,
+            "node",
+            "list",
+            "--no-daemon",
+        ],
+        &[],
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("no Zenoh router answered"), "{err}");
     let (code, _, err) = ratelab(&["ros2", "--domain", "999", "node", "list"], &[]);
     assert_eq!(code, 2);
     assert!(err.contains("--domain"), "{err}");
