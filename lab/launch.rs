@@ -62,6 +62,10 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         .map_err(anyhow::Error::msg)?;
     // Refused before anything is said of the placement (a line naming 49,151 processes).
     ratelab::distributed::check_keys(&cfg.graph)?;
+    // A malformed --listen too (a port in use is known only when the router opens).
+    if let Some(ep) = &a.listen {
+        check_endpoint("--listen", ep, true)?;
+    }
     if on_terminal && run.duration.is_none() && !run.smoke {
         cfg.duration = ratelab::session::UNBOUNDED; // as the lab: until you quit
     }
@@ -185,8 +189,15 @@ fn kills_of(a: &LaunchArgs, cfg: &RunConfig) -> anyhow::Result<Vec<(String, rate
     let names: Vec<String> = cfg.graph.placement().into_iter().map(|(p, _)| p).collect();
     a.kill_processes
         .iter()
-        .map(|k| {
-            if k.at == ratelab::Nanos::ZERO || k.at >= cfg.duration {
+        .enumerate()
+        .map(|(i, k)| {
+            if a.kill_processes[..i].contains(k) {
+                Err(anyhow::anyhow!(
+                    "--kill-process {}@{} is given twice: give it once",
+                    ratelab::text::printable(&k.node),
+                    k.at.as_secs_f64()
+                ))
+            } else if k.at == ratelab::Nanos::ZERO || k.at >= cfg.duration {
                 Err(anyhow::anyhow!(
                     "--kill-process {}@{}: the time must be within the run, after its start and before its end at {} s",
                     ratelab::text::printable(&k.node),
@@ -619,6 +630,8 @@ pub fn run_router(a: &RouterArgs, stop: StopFlag) -> anyhow::Result<()> {
 fn said_as(e: ratelab::distributed::DistError, who: &str) -> anyhow::Error {
     match e {
         ratelab::distributed::DistError::Graph(spec) => spec.into(),
+        // A line that names it already (the launcher's refusal) is not named twice.
+        e if e.to_string().starts_with(&format!("{who} ")) => anyhow::anyhow!("{e}"),
         e => anyhow::anyhow!("{who}: {e}"),
     }
 }
@@ -636,4 +649,25 @@ fn graph_origin(graph: Option<&std::path::Path>) -> String {
 /// one whose stdout was closed runs on, unheard.
 fn say_on_stdout(line: &str) {
     let _ = writeln!(std::io::stdout(), "[ratelab] {line}");
+}
+
+#[cfg(test)]
+mod tests {
+    use ratelab::distributed::DistError;
+
+    #[test]
+    fn a_hand_started_process_s_error_names_it_once() {
+        let said = |e: DistError| super::said_as(e, "process 'robot'").to_string();
+        assert_eq!(
+            said(DistError::Usage("the launcher went away".into())),
+            "process 'robot': the launcher went away"
+        );
+        // The launcher's refusal names it already.
+        assert_eq!(
+            said(DistError::Usage(
+                "process 'robot' was given a different graph file than the launcher".into()
+            )),
+            "process 'robot' was given a different graph file than the launcher"
+        );
+    }
 }

@@ -1188,6 +1188,19 @@ fn a_kill_of_a_process_is_refused_where_it_cannot_be_done_in_one_line() {
             across("real", &["--kill-process", "policy@0"]),
             "after its start and before its end",
         ),
+        // Twice the same kill (it was killed, said, once each).
+        (
+            across(
+                "real",
+                &["--kill-process", "policy@1", "--kill-process", "policy@1"],
+            ),
+            "--kill-process policy@1 is given twice: give it once",
+        ),
+        // A malformed --listen, before the placement is said (it said it, then refused).
+        (
+            across("real", &["--listen", "tls/garbage"]),
+            "--listen tls/garbage: expected tls/HOST:PORT",
+        ),
     ] {
         let o = ratelab(&args);
         if why.starts_with("expected") {
@@ -1196,6 +1209,9 @@ fn a_kill_of_a_process_is_refused_where_it_cannot_be_done_in_one_line() {
             assert!(text(&o.stderr).contains(why), "{}", text(&o.stderr));
         } else {
             assert_one_line_exit_2(&o, why);
+            // Refused before the placement is said.
+            let out = text(&o.stdout);
+            assert!(!out.contains(" in 2 processes: "), "{out}");
         }
     }
 }
