@@ -19,5 +19,10 @@ export RATELAB_ROS2_VENV
 cd "$root"
 cargo test --release --locked "$@"
 if [ $# -eq 0 ]; then
+  # The launches of 128 and 256 processes, one at a time after the suite (ignored in it:
+  # each takes the machine's cores and several GiB while it runs).
+  cargo test --release --locked -p ratelab-lab --test it -- --ignored --exact --test-threads 1 \
+    distributed::a_launch_of_128_processes_equals_the_in_process_run \
+    distributed::a_launch_of_256_processes_equals_the_in_process_run
   "$root/scripts/test-python.sh"
 fi

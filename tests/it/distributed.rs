@@ -2072,7 +2072,8 @@ fn a_small_launch_links_every_pair_of_processes_once() {
 
 /// A launch of 128 processes, a 511-node generated graph dealt out to them, runs the run of
 /// one process, byte for byte. Ignored in the suite: 128 processes start on the machine's
-/// cores and each holds a whole ratelab in memory (several GiB together). Run it alone:
+/// cores and each holds a whole ratelab in memory (several GiB together). `scripts/test.sh`
+/// runs it alone after the suite, as:
 ///
 /// ```sh
 /// cargo test --release -p ratelab-lab --test it -- --ignored --exact \
