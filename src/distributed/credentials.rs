@@ -436,15 +436,24 @@ impl Credentials {
 /// with everything in it when dropped.
 pub struct PrivateDir(tempfile::TempDir);
 
+/// How a launch's private folder's name begins, before its launcher's process id.
+const PRIVATE_PREFIX: &str = "ratelab-launch-";
+
+/// The most entries of the temporary folder looked through for folders left behind.
+const MAX_SWEPT_ENTRIES: usize = 100_000;
+
 impl PrivateDir {
-    /// A new one under the system's temporary folder (`ratelab-launch-XXXXXX`).
+    /// A new one under the system's temporary folder (`ratelab-launch-<PID>-XXXXXX`, PID
+    /// this process's), after removing those of this user whose launcher is no longer
+    /// running ([`PrivateDir::sweep`]).
     ///
     /// # Errors
     /// [`DistError::Usage`] when it cannot be made.
     pub fn new() -> Result<PrivateDir, DistError> {
         use std::os::unix::fs::PermissionsExt as _;
+        PrivateDir::sweep(&std::env::temp_dir());
         tempfile::Builder::new()
-            .prefix("ratelab-launch-")
+            .prefix(&format!("{PRIVATE_PREFIX}{}-", std::process::id()))
             .permissions(std::fs::Permissions::from_mode(0o700))
             .tempdir()
             .map(PrivateDir)
@@ -454,6 +463,41 @@ impl PrivateDir {
     /// Its path.
     pub fn path(&self) -> &Path {
         self.0.path()
+    }
+
+    /// Remove from `tmp` the private folders of this user's launches whose launcher is gone
+    /// (a SIGKILL leaves its folder, with the launch's keys, behind): each a folder, not a
+    /// link, owned by this user, named for a process id that no process has now. Best
+    /// effort, bounded ([`MAX_SWEPT_ENTRIES`]); returns how many were removed.
+    pub fn sweep(tmp: &Path) -> usize {
+        use std::os::unix::fs::MetadataExt as _;
+        let Ok(entries) = std::fs::read_dir(tmp) else {
+            return 0;
+        };
+        // SAFETY: geteuid has no preconditions.
+        let me = unsafe { libc::geteuid() };
+        let mut removed = 0;
+        for entry in entries.take(MAX_SWEPT_ENTRIES).flatten() {
+            let name = entry.file_name();
+            let Some(pid) = (name.to_str())
+                .and_then(|n| n.strip_prefix(PRIVATE_PREFIX))
+                .and_then(|rest| rest.split_once('-'))
+                .and_then(|(pid, _)| pid.parse::<i32>().ok())
+                .filter(|pid| *pid > 0)
+            else {
+                continue;
+            };
+            let Ok(meta) = std::fs::symlink_metadata(entry.path()) else {
+                continue;
+            };
+            // SAFETY: kill with signal 0 only asks whether the process exists.
+            let gone = unsafe { libc::kill(pid, 0) } != 0
+                && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH);
+            if meta.is_dir() && meta.uid() == me && gone {
+                removed += usize::from(std::fs::remove_dir_all(entry.path()).is_ok());
+            }
+        }
+        removed
     }
 
     /// Write `creds` there as `NAME.toml` (mode `0600`; anew, for a process started again)
@@ -474,6 +518,44 @@ mod tests {
 
     fn procs() -> Vec<String> {
         vec!["robot".into(), "policy".into()]
+    }
+
+    #[test]
+    fn a_private_folder_left_by_a_launcher_that_is_gone_is_swept() {
+        let tmp = tempfile::tempdir().unwrap();
+        let mine = std::process::id();
+        // A process id no process has (past the kernel's pid_max).
+        let gone = 0x3fff_fff0;
+        let left = tmp.path().join(format!("ratelab-launch-{gone}-abc123"));
+        let alive = tmp.path().join(format!("ratelab-launch-{mine}-def456"));
+        let older = tmp.path().join("ratelab-launch-XyZ123"); // no process id: kept
+        let other = tmp.path().join(format!("not-ratelab-{gone}-x"));
+        for d in [&left, &alive, &older, &other] {
+            std::fs::create_dir(d).unwrap();
+            std::fs::write(d.join("policy.toml"), "secret").unwrap();
+        }
+        // A link of that name is not followed or removed.
+        let target = tmp.path().join("target");
+        std::fs::create_dir(&target).unwrap();
+        let link = tmp.path().join(format!("ratelab-launch-{gone}-link"));
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        assert_eq!(PrivateDir::sweep(tmp.path()), 1);
+        assert!(!left.exists());
+        assert!(alive.exists() && older.exists() && other.exists() && target.exists());
+        assert!(std::fs::symlink_metadata(&link).is_ok());
+        // A new one is named for this process.
+        let dir = PrivateDir::new().unwrap();
+        let name = dir
+            .path()
+            .file_name()
+            .unwrap()
+            .to_str()
+            .unwrap()
+            .to_string();
+        assert!(
+            name.starts_with(&format!("ratelab-launch-{mine}-")),
+            "{name}"
+        );
     }
 
     #[test]
