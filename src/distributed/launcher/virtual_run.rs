@@ -7,8 +7,6 @@
 use super::admission::Admission;
 use super::relay::{failed, Relay, Relaying};
 use super::{Launch, Link, LockstepCost};
-use crate::monitor::Carried;
-use crate::process::LiveStats;
 use crate::wire::{self, ToLauncher, ToProcess};
 use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::Receiver;
@@ -18,17 +16,8 @@ use ratelab_runtime::runcore::drive::Pacer;
 use ratelab_runtime::scheduler::{EndReason, RunEnd, StopFlag};
 use ratelab_runtime::summary::GraphState;
 use std::collections::BTreeMap;
-use std::sync::{Arc, Mutex};
+use std::sync::Mutex;
 use std::time::{Duration, Instant};
-use zenoh::Wait;
-
-/// Where [`Launch::run_lockstep`] puts what it gathers: every process's report, the wire's
-/// figures, and the newest figures of each process but the plant's ([`Carried`]).
-pub(super) type Gathered<'a> = (
-    &'a mut BTreeMap<String, GraphState>,
-    &'a mut Vec<wire::WireLink>,
-    &'a mut Carried,
-);
 
 impl Launch<'_> {
     /// Follow the run in lockstep from `start` (every process ready) to its end, through
@@ -44,28 +33,11 @@ impl Launch<'_> {
         relaying: &Relaying,
         gone_now: &Mutex<Vec<String>>,
         start: Instant,
-        (reports, wires, carried): Gathered<'_>,
+        reports: &mut BTreeMap<String, GraphState>,
+        wires: &mut Vec<wire::WireLink>,
     ) -> Result<(RunEnd, Option<LockstepCost>), DistError> {
         let (spec, names, link) = (self.spec, &self.names, &self.link);
         let relay = &relaying.relay;
-        // Each process's newest figures (every `STATS_PERIOD`): a process that dies mid-run
-        // never reports, and its topics read what it had counted by then ([`Carried`]), as
-        // under the real clock, not nothing received.
-        let newest: Arc<Mutex<BTreeMap<String, LiveStats>>> = Arc::default();
-        let mut _figures = Vec::new();
-        for p in names.iter().filter(|p| **p != self.robot) {
-            let newest = newest.clone();
-            _figures.push(
-                link.session
-                    .declare_subscriber(link.keys.stats(p))
-                    .callback(move |s| {
-                        if let Some(m) = LiveStats::from_sample(&s) {
-                            ratelab_runtime::graph::lock(&newest).insert(m.process.clone(), m);
-                        }
-                    })
-                    .wait()?,
-            );
-        }
         let lookahead = relay.begin(self.cfg, self.opts.pace.is_some())?;
         let end = self.follow(relay, &relaying.nudged, gone_now, lookahead)?;
         let tally = relay.tally();
@@ -103,10 +75,6 @@ impl Launch<'_> {
             reports,
             wires,
         );
-        drop(_figures);
-        for m in ratelab_runtime::graph::lock(&newest).values() {
-            carried.see(spec, m);
-        }
         Ok((end, lockstep))
     }
 
