@@ -63,9 +63,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     // Refused before anything is said of the placement (a line naming 49,151 processes).
     ratelab::distributed::check_keys(&cfg.graph)?;
     // A malformed --listen too (a port in use is known only when the router opens).
-    if let Some(ep) = &a.listen {
-        check_endpoint("--listen", ep, true)?;
-    }
+    (a.listen.iter()).try_for_each(|ep| check_endpoint("--listen", ep, true))?;
     if on_terminal && run.duration.is_none() && !run.smoke {
         cfg.duration = ratelab::session::UNBOUNDED; // as the lab: until you quit
     }

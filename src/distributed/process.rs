@@ -164,12 +164,10 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         wire_latency,
     } = inbound_ends;
     let tokens = declare_tokens(&session, &keys, &spec, &mine, &opts.process)?;
-    let others: Vec<String> = (spec.placement().into_iter())
-        .map(|(p, _)| p)
-        .filter(|p| p != me)
-        .collect();
+    let others = others_of(&spec, me);
     let linked = (setup.direct && !opts.listen.is_empty()).then_some(others.as_slice());
-    join::wait_heard(&session, &keys, (&publishers, linked), stop, &launcher_gone)?;
+    let _token_watch =
+        join::wait_heard(&session, &keys, (&publishers, linked), stop, &launcher_gone)?;
     let mut reporting = stepper::Reporting::declare(&session, &keys, &opts.process, setup.direct)?;
     // --ros2: this process offers its own nodes; the plant's process `/clock` too. Before
     // saying ready: the wait for external nodes must not eat into the run.
@@ -379,6 +377,14 @@ fn declare_lockstep(
     Ok(subs)
 }
 
+/// The processes of `spec`'s placement other than `process`, in placement order.
+fn others_of(spec: &GraphSpec, process: &str) -> Vec<String> {
+    (spec.placement().into_iter())
+        .map(|(p, _)| p)
+        .filter(|p| p != process)
+        .collect()
+}
+
 /// Where a process hears the other processes' tick reports under the virtual clock.
 #[derive(Debug, Clone, PartialEq, Eq)]
 enum ReportSource {
@@ -395,9 +401,8 @@ fn report_sources(spec: &GraphSpec, direct: bool, process: &str) -> Vec<ReportSo
     let mut sources = vec![ReportSource::Relayed];
     if direct {
         sources.extend(
-            (spec.placement().into_iter())
-                .map(|(p, _)| p)
-                .filter(|p| p != process)
+            others_of(spec, process)
+                .into_iter()
                 .map(ReportSource::Ticked),
         );
     }
@@ -928,7 +933,8 @@ mod tests {
             })
         };
         let patient = (None, std::time::Duration::from_secs(20));
-        super::join::wait_subscribed(&session, &keys, &others, &stop, patient).unwrap();
+        let _watch =
+            super::join::wait_subscribed(&session, &keys, &others, &stop, patient).unwrap();
         let _late = late.join().unwrap();
         // Stopped: it says so at once.
         stop.stop();

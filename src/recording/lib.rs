@@ -991,14 +991,13 @@ impl Recording {
     }
 
     /// Log the end of the run (an event and the summary document) at its end time, flush
-    /// the file, close its sink (rerun writes the file's end then) and move it into place,
-    /// so the recording is complete whichever way the run ended. Nothing is logged to it
-    /// after this.
+    /// and close the file and move it into place, so the recording is complete whichever
+    /// way the run ended. Nothing is logged to it after this.
     ///
     /// # Errors
     /// [`RecordingError::Rerun`] when the flush fails or the file's end could not be
-    /// written (its folder takes no more writes: a full disk), [`RecordingError`] when the
-    /// file cannot be moved into place (e.g. its name was taken meanwhile, without `force`).
+    /// written ([`Recording::close`]), [`RecordingError`] when the file cannot be moved into
+    /// place (e.g. its name was taken meanwhile, without `force`).
     pub fn finish(&self, metrics: &Metrics, end: &RunEnd) -> Result<(), RecordingError> {
         let summary = metrics.summary_lines(None);
         let level = match end.reason {
@@ -1130,20 +1129,27 @@ impl Recording {
             self.send_layout(&shape, Some((&extents, &seen, end.at)))?;
         }
         self.flush()?;
-        // The file's end (rerun's footer) is written as its sink closes, and rerun only logs a
-        // failure there: close it now, before the file takes its name, and look whether its
-        // folder still takes a write (a disk that filled cut the end short, and the
-        // recording must not be said written whole).
+        self.close()?;
+        Ok(self.file.commit()?)
+    }
+
+    /// Close the file's sink: rerun writes the file's end (its footer) then, and only logs a
+    /// failure there, so its folder is tried after (a disk that filled cut the end short,
+    /// and the recording must not be said written whole).
+    ///
+    /// # Errors
+    /// [`RecordingError::Rerun`] when the folder takes no more writes.
+    fn close(&self) -> Result<(), RecordingError> {
         self.rec.disconnect();
-        if let Some(why) = self.path.parent().and_then(writing_beside_fails) {
-            return Err(RecordingError::Rerun {
+        match self.path.parent().and_then(writing_beside_fails) {
+            Some(why) => Err(RecordingError::Rerun {
                 path: self.path.clone(),
                 detail: format!(
                     "its end could not be written ({why}): cut short, what was written is kept and opens as a recording cut short"
                 ),
-            });
+            }),
+            None => Ok(()),
         }
-        Ok(self.file.commit()?)
     }
 
     /// Send every buffered row and flush the file.
