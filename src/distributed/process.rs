@@ -166,8 +166,7 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     let tokens = declare_tokens(&session, &keys, &spec, &mine, &opts.process)?;
     let others = others_of(&spec, me);
     let linked = (setup.direct && !opts.listen.is_empty()).then_some(others.as_slice());
-    let _token_watch =
-        join::wait_heard(&session, &keys, (&publishers, linked), stop, &launcher_gone)?;
+    join::wait_heard(&session, &keys, (&publishers, linked), stop, &launcher_gone)?;
     let mut reporting = stepper::Reporting::declare(&session, &keys, &opts.process, setup.direct)?;
     // --ros2: this process offers its own nodes; the plant's process `/clock` too. Before
     // saying ready: the wait for external nodes must not eat into the run.
@@ -933,8 +932,7 @@ mod tests {
             })
         };
         let patient = (None, std::time::Duration::from_secs(20));
-        let _watch =
-            super::join::wait_subscribed(&session, &keys, &others, &stop, patient).unwrap();
+        super::join::wait_subscribed(&session, &keys, &others, &stop, patient).unwrap();
         let _late = late.join().unwrap();
         // Stopped: it says so at once.
         stop.stop();
