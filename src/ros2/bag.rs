@@ -211,9 +211,15 @@ impl Bag {
     ///
     /// # Errors
     /// [`Ros2Error::Usage`]: `dir` exists and is not a folder, or holds a bag (either file)
-    /// and `force` is false, one of them is a link or not a regular file, or no file can be
-    /// created there ([`ratelab_core::output::check_writable`]; the folder is made).
+    /// and `force` is false, `dir` or one of them is a link, one of them is not a regular
+    /// file, or no file can be created there ([`ratelab_core::output::check_writable`]; the
+    /// folder is made).
     pub fn check(dir: &Path, force: bool) -> Result<(), Ros2Error> {
+        // Never written through a link, as an output file never is (`--force` or not): the
+        // bag's files would be another folder's, named for the link.
+        if std::fs::symlink_metadata(dir).is_ok_and(|m| m.file_type().is_symlink()) {
+            return Err(io(dir, "is a symbolic link; refusing to write through it"));
+        }
         if dir.exists() && !dir.is_dir() {
             return Err(io(dir, "exists and is not a folder"));
         }
@@ -487,6 +493,28 @@ struct FileInfo {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_bag_is_never_written_through_a_linked_folder() {
+        let tmp = tempfile::tempdir().unwrap();
+        let real = tmp.path().join("bag1");
+        std::fs::create_dir(&real).unwrap();
+        let link = tmp.path().join("linkbag");
+        std::os::unix::fs::symlink(&real, &link).unwrap();
+        for force in [false, true] {
+            let e = Bag::check(&link, force).unwrap_err().to_string();
+            assert!(
+                e.contains("linkbag: is a symbolic link; refusing to write through it"),
+                "{e}"
+            );
+        }
+        assert_eq!(
+            std::fs::read_dir(&real).unwrap().count(),
+            0,
+            "nothing written"
+        );
+        Bag::check(&real, false).unwrap();
+    }
 
     #[test]
     fn a_schema_carries_the_types_it_refers_to() {
