@@ -235,26 +235,23 @@ pub(super) fn wait_matching(
     (gone, patience): (Option<&StopFlag>, Duration),
     who: &str,
 ) -> Result<(), DistError> {
-    let deadline = Instant::now() + patience;
-    loop {
-        if p.matching_status().wait().is_ok_and(|m| m.matching()) {
-            return Ok(());
-        }
-        if stop.is_stopped() {
-            return Err(DistError::Peer("interrupted".into()));
-        }
-        if gone.is_some_and(StopFlag::is_stopped) {
-            return Err(DistError::Peer("the launcher went away".into()));
-        }
-        if gone.is_none() && Instant::now() >= deadline {
-            return Err(DistError::Peer(format!(
+    poll_until(
+        stop,
+        gone,
+        gone.is_none().then(|| Instant::now() + patience),
+        Duration::from_millis(10),
+        || match p.matching_status().wait().is_ok_and(|m| m.matching()) {
+            true => Ok(()),
+            false => Err(()),
+        },
+        |()| {
+            format!(
                 "{who} did not subscribe to {} within {} s",
                 p.key_expr(),
                 patience.as_secs()
-            )));
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    }
+            )
+        },
+    )
 }
 
 /// Wait until what this process publishes across is heard: linked directly (`linked`: the
@@ -326,34 +323,30 @@ pub(super) fn wait_subscribed(
             })
             .wait()?
     };
-    let deadline = Instant::now() + patience;
-    loop {
-        let missing: Vec<&str> = {
+    poll_until(
+        stop,
+        gone,
+        gone.is_none().then(|| Instant::now() + patience),
+        Duration::from_millis(2),
+        || {
             let heard = heard.lock().unwrap_or_else(|e| e.into_inner());
-            others
+            let missing: Vec<&str> = others
                 .iter()
                 .filter(|p| !heard.contains(p.as_str()))
                 .map(String::as_str)
-                .collect()
-        };
-        if missing.is_empty() {
-            return Ok(());
-        }
-        if stop.is_stopped() {
-            return Err(DistError::Peer("interrupted".into()));
-        }
-        if gone.is_some_and(StopFlag::is_stopped) {
-            return Err(DistError::Peer("the launcher went away".into()));
-        }
-        if gone.is_none() && Instant::now() >= deadline {
-            return Err(DistError::Peer(format!(
-                "not subscribed within {} s, linked directly: {} (a process announces its nodes once it has subscribed)",
-                patience.as_secs(),
-                ratelab_core::text::listed(missing)
-            )));
-        }
-        std::thread::sleep(Duration::from_millis(2));
-    }
+                .collect();
+            match missing.is_empty() {
+                true => Ok(()),
+                false => Err(ratelab_core::text::listed(missing)),
+            }
+        },
+        |missing| {
+            format!(
+                "not subscribed within {} s, linked directly: {missing} (a process announces its nodes once it has subscribed)",
+                patience.as_secs()
+            )
+        },
+    )
 }
 
 /// Wait until this peer's `session` is linked to `others` peers (the launch's other
@@ -370,25 +363,58 @@ pub(super) fn wait_linked(
     stop: &StopFlag,
     (gone, patience): (Option<&StopFlag>, Duration),
 ) -> Result<(), DistError> {
-    let deadline = Instant::now() + patience;
+    poll_until(
+        stop,
+        gone,
+        Some(Instant::now() + patience),
+        Duration::from_millis(2),
+        || {
+            let linked = session.info().peers_zid().wait().count();
+            match linked >= others {
+                true => Ok(()),
+                false => Err(linked),
+            }
+        },
+        |linked| {
+            format!(
+                "linked directly to {linked} of the launch's {others} other processes within {} s (each listens on its --listen, and the launcher's router tells each of the others)",
+                patience.as_secs()
+            )
+        },
+    )
+}
+
+/// Poll `ready` every `every` until it holds (`Ok`), the one loop of this module's waits.
+/// Its `Err` is what is still missing, said by `timed_out` once `deadline` (if any) passes.
+///
+/// # Errors
+/// [`DistError::Peer`]: "interrupted" on `stop`; "the launcher went away" once `gone`
+/// (watching the launcher's liveliness token) is stopped; `timed_out`'s line after
+/// `deadline`. `stop` and `gone` are checked only while `ready` does not hold, so a wait
+/// already met succeeds.
+fn poll_until<T>(
+    stop: &StopFlag,
+    gone: Option<&StopFlag>,
+    deadline: Option<Instant>,
+    every: Duration,
+    mut ready: impl FnMut() -> Result<(), T>,
+    timed_out: impl FnOnce(T) -> String,
+) -> Result<(), DistError> {
     loop {
-        let linked = session.info().peers_zid().wait().count();
-        if linked >= others {
-            return Ok(());
-        }
+        let missing = match ready() {
+            Ok(()) => return Ok(()),
+            Err(missing) => missing,
+        };
         if stop.is_stopped() {
             return Err(DistError::Peer("interrupted".into()));
         }
         if gone.is_some_and(StopFlag::is_stopped) {
             return Err(DistError::Peer("the launcher went away".into()));
         }
-        if Instant::now() >= deadline {
-            return Err(DistError::Peer(format!(
-                "linked directly to {linked} of the launch's {others} other processes within {} s (each listens on its --listen, and the launcher's router tells each of the others)",
-                patience.as_secs()
-            )));
+        if deadline.is_some_and(|d| Instant::now() >= d) {
+            return Err(DistError::Peer(timed_out(missing)));
         }
-        std::thread::sleep(Duration::from_millis(2));
+        std::thread::sleep(every);
     }
 }
 
@@ -403,4 +429,111 @@ pub(super) fn launchers_seen(session: &zenoh::Session) -> Vec<String> {
                 .map(str::to_string)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const NOW: Duration = Duration::from_millis(1);
+
+    fn said(r: Result<(), DistError>) -> String {
+        r.unwrap_err().to_string()
+    }
+
+    #[test]
+    fn a_wait_ends_when_ready_and_says_what_is_missing_at_its_deadline() {
+        let stop = StopFlag::new();
+        let mut polls = 0;
+        fn polls_left(n: &mut u32) -> Result<(), u32> {
+            *n = n.saturating_sub(1);
+            if *n == 0 {
+                Ok(())
+            } else {
+                Err(*n)
+            }
+        }
+        let mut left = 3;
+        poll_until(
+            &stop,
+            None,
+            None,
+            NOW,
+            || polls_left(&mut left),
+            |_| unreachable!(),
+        )
+        .unwrap();
+        assert_eq!(left, 0);
+        let e = said(poll_until(
+            &stop,
+            None,
+            Some(Instant::now()),
+            NOW,
+            || {
+                polls += 1;
+                Err(polls)
+            },
+            |n| format!("still {n} missing"),
+        ));
+        assert!(e.contains("still 1 missing"), "{e}");
+    }
+
+    #[test]
+    fn a_wait_ends_on_a_stop_or_the_launcher_gone_but_not_once_met() {
+        let (stop, gone) = (StopFlag::new(), StopFlag::new());
+        gone.stop();
+        let never = || Err::<(), ()>(());
+        let e = said(poll_until(
+            &stop,
+            Some(&gone),
+            None,
+            NOW,
+            never,
+            |()| unreachable!(),
+        ));
+        assert!(e.contains("the launcher went away"), "{e}");
+        poll_until(
+            &stop,
+            Some(&gone),
+            None,
+            NOW,
+            || Ok::<(), ()>(()),
+            |()| unreachable!(),
+        )
+        .unwrap();
+        stop.stop();
+        let e = said(poll_until(
+            &stop,
+            Some(&gone),
+            None,
+            NOW,
+            never,
+            |()| unreachable!(),
+        ));
+        assert!(e.contains("interrupted"), "{e}");
+    }
+
+    #[test]
+    fn watching_the_launcher_a_wait_without_a_deadline_outlives_its_patience() {
+        let (stop, gone) = (StopFlag::new(), StopFlag::new());
+        let started = Instant::now();
+        let mut polls = 0;
+        poll_until(
+            &stop,
+            Some(&gone),
+            None,
+            NOW,
+            || {
+                polls += 1;
+                if polls == 20 {
+                    Ok(())
+                } else {
+                    Err(())
+                }
+            },
+            |()| unreachable!(),
+        )
+        .unwrap();
+        assert!(started.elapsed() >= 19 * NOW);
+    }
 }
