@@ -21,9 +21,9 @@ pub struct Ros2Args {
     /// rmw_zenoh's nodes find theirs).
     #[arg(long, global = true, value_name = "ENDPOINT")]
     pub connect: Option<String>,
-    /// How long to wait for the graph's liveliness tokens, seconds.
-    #[arg(long, global = true, default_value_t = 1.0, value_name = "S")]
-    pub wait: f64,
+    /// How long to wait for the graph's liveliness tokens, seconds in [0, 3600].
+    #[arg(long, global = true, default_value = "1", value_name = "S", value_parser = wait_s, allow_negative_numbers = true)]
+    pub wait: Duration,
     /// ros2cli's `--no-daemon`, taken so that ros2 commands and scripts carry over as they
     /// are: ratelab never uses a daemon (each command reads the graph itself), so it changes
     /// nothing.
@@ -49,9 +49,9 @@ pub enum Ros2Command {
         /// Print once, after one second of measuring.
         #[arg(long)]
         once: bool,
-        /// Stop after this many seconds (default: at Ctrl-C).
-        #[arg(long, value_name = "S")]
-        duration: Option<f64>,
+        /// Stop after this many seconds, in (0, 1000000] (default: at Ctrl-C).
+        #[arg(long, value_name = "S", value_parser = time_limit, allow_negative_numbers = true)]
+        duration: Option<Duration>,
     },
     /// Bags (rosbag2, MCAP storage): `bag info DIR`, `bag echo DIR`.
     #[command(subcommand)]
@@ -188,9 +188,10 @@ pub enum TopicVerb {
         /// Print this many messages and exit.
         #[arg(short = 'n', long = "max-count", value_name = "N")]
         count: Option<u64>,
-        /// Stop waiting after this many seconds, as ros2cli's `--timeout` (exit 0).
-        #[arg(long, value_name = "S")]
-        timeout: Option<f64>,
+        /// Stop waiting after this many seconds, in (0, 1000000], as ros2cli's `--timeout`
+        /// (exit 0).
+        #[arg(long, value_name = "S", value_parser = time_limit, allow_negative_numbers = true)]
+        timeout: Option<Duration>,
         /// The QoS to subscribe with.
         #[command(flatten)]
         qos: QosArgs,
@@ -208,9 +209,9 @@ pub enum TopicVerb {
             value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..)
         )]
         window: usize,
-        /// Stop after this many seconds (default: at Ctrl-C).
-        #[arg(long, value_name = "S")]
-        duration: Option<f64>,
+        /// Stop after this many seconds, in (0, 1000000] (default: at Ctrl-C).
+        #[arg(long, value_name = "S", value_parser = time_limit, allow_negative_numbers = true)]
+        duration: Option<Duration>,
         /// The QoS to subscribe with.
         #[command(flatten)]
         qos: QosArgs,
@@ -229,9 +230,9 @@ pub enum TopicVerb {
             value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..)
         )]
         window: usize,
-        /// Stop after this many seconds (default: at Ctrl-C).
-        #[arg(long, value_name = "S")]
-        duration: Option<f64>,
+        /// Stop after this many seconds, in (0, 1000000] (default: at Ctrl-C).
+        #[arg(long, value_name = "S", value_parser = time_limit, allow_negative_numbers = true)]
+        duration: Option<Duration>,
         /// The QoS to subscribe with.
         #[command(flatten)]
         qos: QosArgs,
@@ -395,13 +396,7 @@ pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
         return bag(verb, &stop);
     }
     let domain = domain(args)?;
-    if !(args.wait.is_finite() && (0.0..=3600.0).contains(&args.wait)) {
-        return Err(anyhow!(
-            "--wait must be in [0, 3600] seconds, got {}",
-            args.wait
-        ));
-    }
-    let wait = Duration::from_secs_f64(args.wait);
+    let wait = args.wait;
     let env = ratelab::ros2::session::SessionEnv::from_process();
     let session = inspect::open(args.connect.as_deref(), &env)?;
     let g = inspect::seen(&session, domain, wait)?;
@@ -436,7 +431,7 @@ pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
             qos,
         }) => {
             let limit = if *once { Some(1) } else { *count };
-            let timeout = until("--timeout", *timeout)?;
+            let timeout = *timeout;
             drop(out);
             echo_topic(
                 &session,
@@ -729,15 +724,26 @@ fn echo_topic(
     Ok(())
 }
 
-/// `FLAG S` (`--duration`, `--timeout`) as a time limit (`None`: until Ctrl-C).
+/// `--duration S` or `--timeout S` read as a time limit: seconds in (0, 1000000], refused
+/// by clap before anything is opened, the value quoted as it was typed.
 ///
 /// # Errors
-/// One line when `S` is not in (0, 1000000].
-fn until(flag: &str, duration: Option<f64>) -> Result<Option<Duration>> {
-    match duration {
-        Some(s) if s.is_finite() && s > 0.0 && s <= 1e6 => Ok(Some(Duration::from_secs_f64(s))),
-        Some(s) => Err(anyhow!("{flag} must be in (0, 1000000] seconds, got {s}")),
-        None => Ok(None),
+/// One line when `S` is not a number or not in the range.
+fn time_limit(s: &str) -> Result<Duration, String> {
+    match s.trim().parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 && x <= 1e6 => Ok(Duration::from_secs_f64(x)),
+        _ => Err("must be a number of seconds in (0, 1000000]".into()),
+    }
+}
+
+/// `--wait S`: seconds in [0, 3600], as [`time_limit`].
+///
+/// # Errors
+/// One line when `S` is not a number or not in the range.
+fn wait_s(s: &str) -> Result<Duration, String> {
+    match s.trim().parse::<f64>() {
+        Ok(x) if (0.0..=3600.0).contains(&x) => Ok(Duration::from_secs_f64(x)),
+        _ => Err("must be a number of seconds in [0, 3600]".into()),
     }
 }
 
@@ -758,10 +764,9 @@ fn every_second(
     graph: (&inspect::Seen, u32, Duration),
     (topic, qos): (&str, &QosArgs),
     figures: Figures,
-    duration: Option<f64>,
+    until: Option<Duration>,
     stop: &StopFlag,
 ) -> Result<()> {
-    let until = until("--duration", duration)?;
     let begun = Instant::now();
     let over = || until.is_some_and(|u| begun.elapsed() >= u);
     let bw = matches!(figures, Figures::Bw(_));
@@ -829,9 +834,17 @@ fn bag(verb: &BagVerb, stop: &StopFlag) -> Result<()> {
             let b = Bag::open(dir).map_err(|e| anyhow!(e))?;
             let mut printed = 0u64;
             let mut failed = None;
+            // The topics of the messages passed over (the first few, and whether there are
+            // more), to name when `--topic` matched none.
+            let (mut others, mut more) = (std::collections::BTreeSet::new(), false);
             let note = b
                 .messages(&stopped, |m| {
                     if topic.as_deref().is_some_and(|want| want != m.topic) {
+                        if others.len() < ratelab::text::LISTED_NAMES {
+                            others.insert(m.topic.to_string());
+                        } else {
+                            more |= !others.contains(m.topic);
+                        }
                         return true;
                     }
                     if count.is_some_and(|n| printed >= n) {
@@ -862,8 +875,17 @@ fn bag(verb: &BagVerb, stop: &StopFlag) -> Result<()> {
             if let Some(e) = failed {
                 return Err(e.into());
             }
-            if let Some(n) = note {
+            if let Some(n) = &note {
                 eprintln!("ratelab: {n}");
+            }
+            if let (Some(want), 0, None) = (topic, printed, note) {
+                let named = ratelab::text::listed(others.iter().map(String::as_str));
+                return Err(anyhow!(
+                    "no messages on {} in this bag (its topics: {}{})",
+                    ratelab::text::printable(want),
+                    if others.is_empty() { "none" } else { &named },
+                    if more { ", …" } else { "" }
+                ));
             }
         }
     }
@@ -876,10 +898,9 @@ fn graph(
     session: &inspect::Session,
     g: &inspect::Seen,
     once: bool,
-    duration: Option<f64>,
+    until: Option<Duration>,
     stop: &StopFlag,
 ) -> Result<()> {
-    let until = until("--duration", duration)?;
     let counts: Arc<Mutex<std::collections::BTreeMap<String, u64>>> = Arc::default();
     let mut subs = Vec::new();
     let mut topics: Vec<&str> = Vec::new();

@@ -468,6 +468,23 @@ fn bag_info_and_echo_read_ratelab_s_bags_rosbags_bags_and_bags_cut_short() {
     );
     assert!(out.contains("# /obs at 0.020000000 s\n"), "{out}");
     assert_eq!(out.matches("---\n").count(), 2, "{out}");
+    // A topic with no messages in the bag (a typo) is said, with the topics it has.
+    let (code, out, err) = ratelab(
+        &[
+            "ros2",
+            "bag",
+            "echo",
+            ours.to_str().unwrap(),
+            "--topic",
+            "/ob",
+        ],
+        &[],
+    );
+    assert_eq!((code, out.as_str()), (2, ""), "{err}");
+    assert_eq!(
+        err.trim_end(),
+        "error: no messages on /ob in this bag (its topics: /action, /clock, /obs, /parameter_events)"
+    );
 
     // rosbags' writer: MCAP storage, times since 1970, no hashes.
     let theirs = dir.path().join("theirs");

@@ -304,6 +304,40 @@ fn a_window_below_one_is_refused_in_one_line() {
     }
 }
 
+/// A time limit out of range (`--timeout`, `--duration`, `--wait`) is refused as the
+/// window is: before any session opens (no router runs here), in one short line quoting the
+/// value as typed (`1e300`, not its 301 digits), exit 2.
+#[test]
+fn a_time_limit_out_of_range_is_refused_before_connecting_in_one_short_line() {
+    let _m = crate::machine::shared();
+    for (args, flag) in [
+        (
+            &["topic", "echo", "/obs", "--timeout", "1e300"][..],
+            "--timeout",
+        ),
+        (
+            &["topic", "echo", "/obs", "--timeout", "0"][..],
+            "--timeout",
+        ),
+        (
+            &["topic", "hz", "/obs", "--duration", "NaN"][..],
+            "--duration",
+        ),
+        (&["graph", "--duration", "-1"][..], "--duration"),
+        (&["node", "list", "--wait", "inf"][..], "--wait"),
+    ] {
+        let args: Vec<&str> = ["ros2"].iter().chain(args).copied().collect();
+        let (code, out, err, _) = ratelab_within(&args, Duration::from_secs(30));
+        assert_eq!((code, out.as_str()), (2, ""), "{args:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(
+            err.contains(flag) && err.contains("must be a number of seconds"),
+            "{err}"
+        );
+        assert!(err.len() < 160, "{err}");
+    }
+}
+
 /// `topic list -v`'s lines (` * /topic [a, b] N publishers`) as (topic, its types as a set),
 /// each section's.
 fn verbose_topics(section: &str) -> Vec<(String, BTreeSet<String>)> {
