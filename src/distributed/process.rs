@@ -190,9 +190,16 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     // Live counters for `ratelab top` and `ratelab lab --attach`, every [`STATS_PERIOD`],
     // and once more after the run (its last steps).
     // Dropped under congestion (Zenoh's default): a watcher that stalls must never hold up
-    // the run or its reports.
+    // the run or its reports. And at Zenoh's lowest priority, `Background`: each priority
+    // has its own queue of batches on a link, so figures of a large graph (hundreds of KB,
+    // in pieces, every 100 ms) never fill the queue the run's own messages need. At the
+    // default priority they did: under the virtual clock the ticks run, and put their
+    // messages that must arrive, on the one Zenoh thread that empties that queue, so with a
+    // watcher attached (`ratelab top`) a put found it full, Zenoh closed the link after 5 s
+    // and the process read its launcher gone.
     let stats_pub = session
         .declare_publisher(keys.stats(&opts.process))
+        .priority(zenoh::qos::Priority::Background)
         .wait()?;
     let share = Arc::new(Share {
         process: opts.process.clone(),

@@ -517,6 +517,8 @@ fn a_lockstep_refuses_a_join_stops_at_one_instant_on_ctrl_c_and_ends_when_a_proc
     // The policy's process killed: the run ends at once, naming it (not after a timeout).
     let port = free_port();
     let (mut launcher, rx, mut lines) = lockstep_launch(port, &dir.path().join("kill"));
+    // Long enough for its figures (every 100 ms) to have come.
+    std::thread::sleep(Duration::from_secs(1));
     let killed = Instant::now();
     kill_node_process(port, "policy");
     let status = exit_within(&mut launcher, 30);
@@ -531,6 +533,19 @@ fn a_lockstep_refuses_a_join_stops_at_one_instant_on_ctrl_c_and_ends_when_a_proc
         lines.iter().any(|l| l.contains("process 'policy' is gone")),
         "{lines:?}"
     );
+    // /obs, which the dead policy's process held, reads what it counted until its last
+    // figures, the rest lost, as under the real clock: not every message sent lost.
+    let m: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("kill/metrics.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(m["missing_processes"], serde_json::json!(["policy"]), "{m}");
+    let obs = &m["topics"]["/obs"];
+    let (published, lost) = (
+        obs["published"].as_u64().unwrap(),
+        obs["lost"].as_u64().unwrap_or(0),
+    );
+    assert!(published > 50 && lost > 0 && lost < published, "{obs}");
     assert_none_left(port, Duration::from_millis(500));
 }
 

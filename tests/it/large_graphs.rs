@@ -114,6 +114,51 @@ fn a_thousand_node_graph_across_eight_processes_equals_the_in_process_run() {
     }
 }
 
+/// A watcher attached to a large launch under the virtual clock (`ratelab top`, as a learner
+/// opens one beside it) never breaks the run. Each of the 8 processes' figures is hundreds
+/// of KB every 100 ms; sent at Zenoh's default priority they filled the queue of the
+/// process's link that its ticks' own puts needed, on the one Zenoh thread that empties
+/// it, and after 5 s Zenoh closed the link: the processes read their launcher gone and the
+/// run failed ("process 'ctl_2': the launcher went away", observed with `top` polled).
+#[test]
+fn a_watcher_never_breaks_a_large_launch_under_the_virtual_clock() {
+    use crate::distributed::{bin, exit_within, free_port};
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let g = generated(dir.path(), "g.toml", 1000, 8);
+    let ep = format!("tls/127.0.0.1:{}", free_port());
+    let creds = dir.path().join("creds.toml");
+    let log = dir.path().join("launch.log");
+    let mut launch = bin()
+        .args(["launch", &g, "--processes", "--clock", "virtual"])
+        .args(["--duration", "3", "--seed", "3", "--listen", &ep])
+        .arg("--export-credentials")
+        .arg(&creds)
+        .arg("--out")
+        .arg(dir.path().join("out"))
+        .stdout(std::fs::File::create(&log).unwrap())
+        .stderr(std::fs::File::create(dir.path().join("launch.err")).unwrap())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    let mut watched = 0;
+    while launch.try_wait().unwrap().is_none() && started.elapsed() < Duration::from_secs(240) {
+        let top = bin()
+            .args(["top", "--once", "--connect", &ep, "--credentials"])
+            .arg(&creds)
+            .output()
+            .unwrap();
+        watched += usize::from(top.status.success() && text(&top.stdout).contains("8 process(es)"));
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    let status = exit_within(&mut launch, 60);
+    let said = std::fs::read_to_string(dir.path().join("launch.err")).unwrap();
+    assert!(status.success(), "{said}");
+    assert!(!said.contains("went away"), "{said}");
+    // Watched through much of the run, not only its last moments.
+    assert!(watched >= 5, "watched {watched} times");
+}
+
 /// A launch of 64 processes (issue 51: "launches of 64+ processes"): a 256-node graph dealt
 /// out to 64 processes runs the run of one process, byte for byte. `ratelab graph` refuses
 /// 64 processes of fewer than 255 nodes, rather than fill fewer without a word.

@@ -569,7 +569,8 @@ pub fn launch(
     let start = Instant::now();
     let mut reports: BTreeMap<String, GraphState> = BTreeMap::new();
     let mut wires: Vec<wire::WireLink> = Vec::new();
-    // What a process started again mid-run counted before (real clock only).
+    // What the processes counted as their figures said: a process started again mid-run
+    // (real clock) goes on from it, one that died reads it (either clock).
     let mut carried = Carried::new(spec);
     // The processes killed on request (real clock), with when.
     let mut killed = Vec::new();
@@ -577,8 +578,8 @@ pub fn launch(
     // clock, up to when it came (`taken_at`).
     let (end, lockstep, taken_at) = match &relaying {
         Some(relaying) => {
-            let (end, lockstep) =
-                me.run_lockstep(relaying, &gone_now, start, &mut reports, &mut wires)?;
+            let gathered = (&mut reports, &mut wires, &mut carried);
+            let (end, lockstep) = me.run_lockstep(relaying, &gone_now, start, gathered)?;
             (end, lockstep, BTreeMap::new())
         }
         None => {

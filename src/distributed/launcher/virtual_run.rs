@@ -7,6 +7,8 @@
 use super::admission::Admission;
 use super::relay::{failed, Relay, Relaying};
 use super::{Launch, Link, LockstepCost};
+use crate::monitor::Carried;
+use crate::process::LiveStats;
 use crate::wire::{self, ToLauncher, ToProcess};
 use crate::{DistError, REPLY_TIMEOUT};
 use crossbeam_channel::Receiver;
@@ -16,8 +18,17 @@ use ratelab_runtime::runcore::drive::Pacer;
 use ratelab_runtime::scheduler::{EndReason, RunEnd, StopFlag};
 use ratelab_runtime::summary::GraphState;
 use std::collections::BTreeMap;
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
+use zenoh::Wait;
+
+/// Where [`Launch::run_lockstep`] puts what it gathers: every process's report, the wire's
+/// figures, and the newest figures of each process but the plant's ([`Carried`]).
+pub(super) type Gathered<'a> = (
+    &'a mut BTreeMap<String, GraphState>,
+    &'a mut Vec<wire::WireLink>,
+    &'a mut Carried,
+);
 
 impl Launch<'_> {
     /// Follow the run in lockstep from `start` (every process ready) to its end, through
@@ -33,11 +44,28 @@ impl Launch<'_> {
         relaying: &Relaying,
         gone_now: &Mutex<Vec<String>>,
         start: Instant,
-        reports: &mut BTreeMap<String, GraphState>,
-        wires: &mut Vec<wire::WireLink>,
+        (reports, wires, carried): Gathered<'_>,
     ) -> Result<(RunEnd, Option<LockstepCost>), DistError> {
         let (spec, names, link) = (self.spec, &self.names, &self.link);
         let relay = &relaying.relay;
+        // Each process's newest figures (every `STATS_PERIOD`): a process that dies mid-run
+        // never reports, and its topics read what it had counted by then ([`Carried`]), as
+        // under the real clock, not nothing received. Kept as they came (a sample holds its
+        // bytes by reference) and decoded once, after the run: the callback runs on the
+        // launcher's one Zenoh thread, which the lockstep's reports cross too.
+        let newest: Arc<Mutex<BTreeMap<String, zenoh::sample::Sample>>> = Arc::default();
+        let mut _figures = Vec::new();
+        for p in names.iter().filter(|p| **p != self.robot) {
+            let (newest, p2) = (newest.clone(), p.to_string());
+            _figures.push(
+                link.session
+                    .declare_subscriber(link.keys.stats(p))
+                    .callback(move |s| {
+                        ratelab_runtime::graph::lock(&newest).insert(p2.clone(), s);
+                    })
+                    .wait()?,
+            );
+        }
         let lookahead = relay.begin(self.cfg, self.opts.pace.is_some())?;
         let end = self.follow(relay, &relaying.nudged, gone_now, lookahead)?;
         let tally = relay.tally();
@@ -75,6 +103,12 @@ impl Launch<'_> {
             reports,
             wires,
         );
+        drop(_figures);
+        for s in ratelab_runtime::graph::lock(&newest).values() {
+            if let Some(m) = LiveStats::from_sample(s) {
+                carried.see(spec, &m);
+            }
+        }
         Ok((end, lockstep))
     }
 
