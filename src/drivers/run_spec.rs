@@ -490,7 +490,7 @@ impl RunSpec {
             (Setting::ControlHz, self.control_hz.is_some()),
         ] {
             if given {
-                graph.chain_for(name(setting))?;
+                graph.chain_for(name(setting), speech)?;
             }
         }
         Ok(control_hz)

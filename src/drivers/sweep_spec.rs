@@ -96,7 +96,7 @@ fn shared_config(
     if base.spin_margin_us.is_none() {
         cfg.spin_margin = DEFAULT_SPIN_MARGIN;
     }
-    let chain = cfg.graph.chain_for(what)?;
+    let chain = cfg.graph.chain_for(what, speech)?;
     let mut varied = vec![(Setting::ControlHz, chain.policy)];
     if varies_sensor {
         varied.push((Setting::SensorHz, chain.sensor));

@@ -399,6 +399,15 @@ fn run<'py>(
         .unwrap_or_default();
     let files = interruptibly(py, move |stop| {
         ratelab::held_run::run(&spec, brain, &classes, Speech::Keywords, stop)
+    })
+    .inspect_err(|e| {
+        // Refused for a Python exception (a brain file's import failing, a node class's
+        // `__init__` raising): that exception, with its traceback, is the cause, as a
+        // failed node's is `NodeFailed`'s.
+        let cause = ratelab::python::take_failure();
+        if let Some(cause) = cause.filter(|_| !e.is_instance_of::<PyKeyboardInterrupt>(py)) {
+            e.set_cause(py, Some(cause));
+        }
     })?;
     let out = PyDict::new(py);
     out.set_item("warnings", late)?;

@@ -162,34 +162,49 @@ impl Drop for OutputCapture {
 /// [`PythonError::Interpreter`] when the interpreter cannot start (one line naming the
 /// interpreter found and why) or the support module cannot be loaded.
 pub fn start() -> Result<(), PythonError> {
-    let result = SUPPORT.get_or_init(|| {
-        let started_here = embed::initialize()?;
-        // The interpreter runs now: PyO3's own initialisation only records that it is up.
-        Python::initialize();
-        let hosted = HOSTED.load(std::sync::atomic::Ordering::Relaxed);
-        Python::attach(|py| {
-            if !hosted {
-                embed::run_startup(py, started_here)?;
-            }
-            PyModule::from_code(py, SUPPORT_SOURCE, c"<ratelab>", c"_ratelab_support")
-                .and_then(|m| {
-                    // What learners' code writes goes to the run's text log (in a host's
-                    // interpreter only while a run goes: [`capture_output`]).
-                    m.add_function(wrap_pyfunction!(log_line, &m)?)?;
-                    if !hosted {
-                        m.call_method0("_capture_output")?;
-                    }
-                    Ok(m)
-                })
-                .map(Bound::unbind)
-                .map_err(|e| format!("ratelab's Python support failed to load: {e}"))
-        })
-    });
+    // In a host's interpreter the caller may hold it (`ratelab.run` from two threads at once),
+    // and loading the support module runs Python code, which hands the interpreter to other
+    // threads between its steps: a caller holding it while waiting here would keep it from
+    // the thread loading (a deadlock, observed). PyO3's `get_or_init_py_attached` lets go of
+    // the interpreter while it waits. The binary's own interpreter is started here first, by
+    // a thread holding nothing.
+    let result = if HOSTED.load(std::sync::atomic::Ordering::Relaxed) && SUPPORT.get().is_none() {
+        use pyo3::sync::OnceLockExt;
+        Python::attach(|py| SUPPORT.get_or_init_py_attached(py, load_support))
+    } else {
+        SUPPORT.get_or_init(load_support)
+    };
     start_watchdog();
     match result {
         Ok(_) => Ok(()),
         Err(e) => Err(PythonError::Interpreter(e.clone())),
     }
+}
+
+/// [`start`]'s work, once: the interpreter started if it is not running (its start-up run
+/// when ratelab started it), then the support module loaded.
+fn load_support() -> Result<Py<PyModule>, String> {
+    let started_here = embed::initialize()?;
+    // The interpreter runs now: PyO3's own initialisation only records that it is up.
+    Python::initialize();
+    let hosted = HOSTED.load(std::sync::atomic::Ordering::Relaxed);
+    Python::attach(|py| {
+        if !hosted {
+            embed::run_startup(py, started_here)?;
+        }
+        PyModule::from_code(py, SUPPORT_SOURCE, c"<ratelab>", c"_ratelab_support")
+            .and_then(|m| {
+                // What learners' code writes goes to the run's text log (in a host's
+                // interpreter only while a run goes: [`capture_output`]).
+                m.add_function(wrap_pyfunction!(log_line, &m)?)?;
+                if !hosted {
+                    m.call_method0("_capture_output")?;
+                }
+                Ok(m)
+            })
+            .map(Bound::unbind)
+            .map_err(|e| format!("ratelab's Python support failed to load: {e}"))
+    })
 }
 
 /// `_ratelab_support._log(level, text, node=None, caller=None)`: a line (or lines) a

@@ -7,6 +7,7 @@ line being the innermost frame in the learner's own files (the folder of the scr
 NumPy internal never hides where the learner's code went wrong.
 """
 
+import inspect
 import math
 import os
 import sys
@@ -110,20 +111,36 @@ class _Lines:
         return False
 
 
+# Runs going at once (`ratelab.run` from several threads) share one capture: the first to
+# start installs it, the last to end puts back the streams as they were before the first.
+_capturing = {"runs": 0, "before": None}
+_capture_lock = threading.Lock()
+
+
 def _capture_output():
-    """Send `sys.stdout` and `sys.stderr` to the run's text log; returns what they were."""
-    prev = (sys.stdout, sys.stderr)
-    sys.stdout = _Lines("info")
-    sys.stderr = _Lines("warn")
-    return prev
+    """Send `sys.stdout` and `sys.stderr` to the run's text log (each line to the log of the
+    run whose thread wrote it); returns a token for `_restore_output`."""
+    with _capture_lock:
+        if _capturing["runs"] == 0:
+            _capturing["before"] = (sys.stdout, sys.stderr)
+            sys.stdout = _Lines("info")
+            sys.stderr = _Lines("warn")
+        _capturing["runs"] += 1
+        return _capturing["before"]
 
 
 def _restore_output(prev):
-    """Put back what `_capture_output` returned, after the last partial lines are logged."""
-    for stream in (sys.stdout, sys.stderr):
-        if isinstance(stream, _Lines):
-            stream.flush_all()
-    sys.stdout, sys.stderr = prev
+    """Called once for each `_capture_output` (`prev`, its token): when no other run is
+    going, the last partial lines are logged and the streams put back as they were."""
+    with _capture_lock:
+        _capturing["runs"] = max(0, _capturing["runs"] - 1)
+        if _capturing["runs"] > 0:
+            return
+        for stream in (sys.stdout, sys.stderr):
+            if isinstance(stream, _Lines):
+                stream.flush_all()
+        sys.stdout, sys.stderr = _capturing["before"] or prev
+        _capturing["before"] = None
 
 
 def callable_brain(fn):
@@ -243,11 +260,24 @@ def brain_caller(module, function, script):
                             f"`def {function}(obs): return action`")
     if not callable(fn):
         raise ContractError(script, f"'{function}' is a {type(fn).__name__}, not a function")
+    code = getattr(fn, "__code__", None)
+    where = f"{code.co_filename}:{code.co_firstlineno}" if code else script
+    # Refused before the run when it cannot take the observation, as a callable brain is,
+    # naming its own signature (not a line of ratelab's, at its first call).
+    try:
+        sig = inspect.signature(fn)
+    except (TypeError, ValueError):  # no signature Python can read: judged when called
+        sig = None
+    if sig is not None:
+        try:
+            sig.bind(None)
+        except TypeError:
+            raise ContractError(where, f"a brain is called with one argument, the observation "
+                                f"(`def {function}(obs): return action`); {function}{sig} "
+                                "cannot take it") from None
     import numpy as np
 
     array, asarray, f32 = np.array, np.asarray, np.float32
-    code = getattr(fn, "__code__", None)
-    where = f"{code.co_filename}:{code.co_firstlineno}" if code else script
 
     def call(obs):
         result = fn(array(obs, dtype=f32))

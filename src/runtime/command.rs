@@ -152,13 +152,17 @@ impl Command {
         match self {
             Command::SetControlHz { hz } => crate::config::check_rate("control-hz", *hz)
                 .and_then(|_| {
-                    let id = graph.chain_for("the control rate")?.policy;
+                    let id = graph
+                        .chain_for("the control rate", crate::setting::Speech::Flags)?
+                        .policy;
                     Ok(graph.set_rate_of(id, *hz)?)
                 })
                 .map_err(|e| e.to_string()),
             Command::SetSensorHz { hz } => crate::config::check_rate("sensor-hz", *hz)
                 .and_then(|_| {
-                    let id = graph.chain_for("the sensor rate")?.sensor;
+                    let id = graph
+                        .chain_for("the sensor rate", crate::setting::Speech::Flags)?
+                        .sensor;
                     Ok(graph.set_rate_of(id, *hz)?)
                 })
                 .map_err(|e| e.to_string()),

@@ -41,8 +41,14 @@ pub enum ConfigError {
     Duration(f64),
     /// Unknown clock name.
     Clock(String),
-    /// A fault names no node of the graph, or there are too many.
-    Fault(String),
+    /// A fault names no node of the graph or takes effect past the longest run (`fault`:
+    /// which), or there are too many (`fault`: `None`); `why` says what.
+    Fault {
+        /// The fault refused, when one is.
+        fault: Option<ratelab_core::qos::Fault>,
+        /// Why, one line.
+        why: String,
+    },
     /// A real-time priority outside 1..=99.
     RtPriority(u8),
     /// A phase offset not finite, negative, or not below one second.
@@ -112,9 +118,15 @@ impl ConfigError {
             ConfigError::Clock(c) => {
                 format!("{} must be 'real' or 'virtual', got '{c}'", name(Setting::Clock))
             }
-            ConfigError::Fault(f) => match speech {
-                Speech::Flags => format!("--stall/--kill: {f}"),
-                Speech::Keywords => format!("stall/kill: {f}"),
+            ConfigError::Fault { fault, why } => match (speech, fault) {
+                (Speech::Flags, Some(f)) => format!("--stall/--kill: {f}: {why}"),
+                (Speech::Flags, None) => format!("--stall/--kill: {why}"),
+                // In the keyword's words: `stall["polcy"]`, not the flag's `stall polcy@…`.
+                (Speech::Keywords, Some(f)) => {
+                    let kind = if f.duration.is_some() { "stall" } else { "kill" };
+                    format!("{kind}[{:?}]: {why}", f.node)
+                }
+                (Speech::Keywords, None) => format!("stall/kill: {why}"),
             },
             ConfigError::RtPriority(p) => {
                 format!("{} must be in 1..=99, got {p}", name(Setting::RtPriority))
@@ -291,7 +303,7 @@ impl RunConfig {
     /// [`ConfigError::Rate`] naming the flag.
     pub fn set_sensor_hz(&mut self, hz: f64) -> Result<(), ConfigError> {
         check_rate("sensor-hz", hz)?;
-        let id = self.graph.chain_for("--sensor-hz")?.sensor;
+        let id = self.graph.chain_for("--sensor-hz", Speech::Flags)?.sensor;
         Ok(self.graph.set_rate_of(id, hz)?)
     }
 
@@ -301,7 +313,7 @@ impl RunConfig {
     /// [`ConfigError::Rate`] naming the flag.
     pub fn set_control_hz(&mut self, hz: f64) -> Result<(), ConfigError> {
         check_rate("control-hz", hz)?;
-        let id = self.graph.chain_for("--control-hz")?.policy;
+        let id = self.graph.chain_for("--control-hz", Speech::Flags)?.policy;
         Ok(self.graph.set_rate_of(id, hz)?)
     }
 
@@ -330,6 +342,7 @@ impl RunConfig {
         // A sweep or a cliff search varies the chain's rates: say so by name.
         self.graph.chain_for(
             "a sweep or cliff search (it varies the chain's sensor and control rates)",
+            Speech::Flags,
         )?;
         self.set_sensor_hz(sensor_hz)?;
         self.set_control_hz(control_hz)?;
@@ -368,10 +381,10 @@ impl RunConfig {
         if self.faults.len() > MAX_FAULTS {
             let got = self.faults.len();
             let line = format_args!("at most {MAX_FAULTS} faults, got {got}");
-            return Err(ConfigError::Fault(ratelab_core::limits::refusal(
-                line,
-                "MAX_FAULTS",
-            )));
+            return Err(ConfigError::Fault {
+                fault: None,
+                why: ratelab_core::limits::refusal(line, "MAX_FAULTS"),
+            });
         }
         for f in &self.faults {
             // The bound `--stall`'s text is read with, for a fault given as data (a session
@@ -379,20 +392,27 @@ impl RunConfig {
             // stall longer than it is refused as `--stall` refuses it.
             let max = ratelab_core::time::MAX_DURATION;
             if f.at > max || f.duration.is_some_and(|d| d > max) {
-                return Err(ConfigError::Fault(ratelab_core::limits::refusal(
-                    format_args!(
-                        "{f}: its times must be in [0, {}] s",
-                        ratelab_core::limits::MAX_DURATION_S
+                return Err(ConfigError::Fault {
+                    fault: Some(f.clone()),
+                    why: ratelab_core::limits::refusal(
+                        format_args!(
+                            "its times must be in [0, {}] s",
+                            ratelab_core::limits::MAX_DURATION_S
+                        ),
+                        "MAX_DURATION_S",
                     ),
-                    "MAX_DURATION_S",
-                )));
+                });
             }
             if self.graph.node_id(&f.node).is_none() {
-                return Err(ConfigError::Fault(format!(
-                    "{f}: unknown node '{}' (nodes: {})",
-                    f.node,
-                    self.graph.node_names().join(", ")
-                )));
+                let names = self.graph.node_names();
+                return Err(ConfigError::Fault {
+                    fault: Some(f.clone()),
+                    why: format!(
+                        "unknown node '{}' (nodes: {})",
+                        ratelab_core::text::printable(&f.node),
+                        ratelab_core::text::listed(names.iter().map(|n| n.as_ref()))
+                    ),
+                });
             }
         }
         // The real clock starts a thread per node on a thread of its own, and each shared

@@ -284,6 +284,43 @@ def test_a_brain_or_node_class_that_cannot_take_its_argument_is_refused_naming_i
     assert "NoHandle() cannot take it" in line, line
 
 
+def test_refusals_of_faults_and_of_the_chain_speak_in_keywords():
+    # Not the command line's `stall polcy@200 ms+100 ms` or `(--rate NODE=HZ, …)`.
+    with pytest.raises(ratelab.SettingError) as e:
+        ratelab.run(stall={"polcy": (0.2, 0.1)}, **VIRTUAL)
+    assert str(e.value).startswith('stall["polcy"]: unknown node \'polcy\' (nodes: '), str(e.value)
+    with pytest.raises(ratelab.SettingError) as e:
+        ratelab.run(kill={"polic": 0.5}, **VIRTUAL)
+    assert str(e.value).startswith('kill["polic"]: unknown node'), str(e.value)
+    with pytest.raises(ratelab.SettingError) as e:
+        ratelab.run(graph="graphs/cartpole-open-loop.toml", control_hz=10, **VIRTUAL)
+    line = str(e.value)
+    assert line.startswith("control_hz speaks of the chapter's chain"), line
+    assert "rate={'NODE': HZ}, depth={'TOPIC': N}" in line and "--" not in line, line
+
+
+def test_a_brain_file_that_fails_to_load_keeps_its_exception_as_the_cause(tmp_path):
+    # Its import failing or its `act` unable to take the observation is refused before the
+    # run; the file's own exception, with its traceback, is the cause (`except ImportError`
+    # on `e.__cause__`, `%debug`), as a failed node's is.
+    broken = tmp_path / "broken.py"
+    broken.write_text("import notamodule_xyz\n\ndef act(obs):\n    return 0.0\n")
+    with pytest.raises(ratelab.SettingError) as e:
+        ratelab.run(policy=str(broken), **VIRTUAL)
+    assert "ModuleNotFoundError" in str(e.value) and "<ratelab>" not in str(e.value)
+    cause = e.value.__cause__
+    assert isinstance(cause, ModuleNotFoundError), repr(cause)
+    assert any(f.filename == str(broken) for f in traceback.extract_tb(cause.__traceback__))
+    two = tmp_path / "two.py"
+    two.write_text("def act(obs, extra):\n    return 0.0\n")
+    with pytest.raises(ratelab.Error) as e:
+        ratelab.run(policy=str(two), **VIRTUAL)
+    line = str(e.value)
+    assert not isinstance(e.value, ratelab.NodeFailed), line
+    assert "act(obs, extra) cannot take it" in line and "<ratelab>" not in line, line
+    assert line.startswith(f"{two}:1: "), line
+
+
 def test_a_node_class_that_raises_is_the_cause_with_its_traceback():
     with pytest.raises(ratelab.NodeFailed) as e:
         ratelab.run(graph="graphs/cartpole-python.toml", nodes={"policy": _RaisingBalancer},
@@ -364,6 +401,35 @@ def in_a_fresh_interpreter(code):
                           timeout=120)
     assert done.returncode == 0, done.stderr
     return done.stdout
+
+
+def test_runs_compare_by_what_they_wrote():
+    # A learner checks "same seed, same run" with `==` (it raised: the dataclass compared
+    # dicts of arrays), and may keep runs in a set.
+    a, b = (ratelab.run(clock="virtual", duration_s=0.5, seed=2) for _ in range(2))
+    other = ratelab.run(clock="virtual", duration_s=0.5, seed=3)
+    assert a == b and not (a != b) and a.trace_csv == b.trace_csv
+    assert a != other and len({a, b, other}) == 2
+    assert (a == "a run") is False
+    assert "Two runs are equal" in ratelab.Run.__doc__ and "trace_csv:" in ratelab.Run.__doc__
+
+
+def test_first_runs_from_two_threads_at_once_both_finish():
+    # The first calls of a fresh process load ratelab's support module; two threads at once
+    # deadlocked there (one holding the interpreter while it waited for the other, which
+    # needed the interpreter to finish), never to end. Each run as one thread alone.
+    said = in_a_fresh_interpreter("\n".join([
+        "import faulthandler, threading, ratelab",
+        "faulthandler.dump_traceback_later(60, exit=True)",
+        "out = {}",
+        "def go(seed):",
+        "    out[seed] = ratelab.run(clock='virtual', duration_s=0.5, seed=seed).metrics_json",
+        "threads = [threading.Thread(target=go, args=(s,)) for s in (0, 1)]",
+        "[t.start() for t in threads]; [t.join() for t in threads]",
+        "alone = ratelab.run(clock='virtual', duration_s=0.5, seed=1).metrics_json",
+        "print(len(out), out[1] == alone)",
+    ]))
+    assert said.split() == ["2", "True"], said
 
 
 def test_import_ratelab_does_not_import_numpy():

@@ -975,14 +975,23 @@ impl GraphSpec {
     }
 
     /// The chain, or a one-line reason naming what uses it (`--control-hz`, a lab key)
-    /// when the graph has none.
+    /// when the graph has none, and what to give instead in `speech`'s words
+    /// (`--rate NODE=HZ` or `rate={'NODE': HZ}`).
     ///
     /// # Errors
     /// [`OverrideError`]: the graph has no chapter chain.
-    pub fn chain_for(&self, what: &str) -> Result<Chain, OverrideError> {
+    pub fn chain_for(
+        &self,
+        what: &str,
+        speech: crate::setting::Speech,
+    ) -> Result<Chain, OverrideError> {
+        let instead = match speech {
+            crate::setting::Speech::Flags => "--rate NODE=HZ, --depth TOPIC=N",
+            crate::setting::Speech::Keywords => "rate={'NODE': HZ}, depth={'TOPIC': N}",
+        };
         self.chain.ok_or_else(|| {
             OverrideError(format!(
-                "{what} speaks of the chapter's chain (sensor → policy → actuator), which graph '{}' does not have: name a node or topic instead (--rate NODE=HZ, --depth TOPIC=N)",
+                "{what} speaks of the chapter's chain (sensor → policy → actuator), which graph '{}' does not have: name a node or topic instead ({instead})",
                 self.name
             ))
         })
@@ -1276,7 +1285,7 @@ depth = 1
         assert_eq!(g.chain, None);
         assert_eq!((g.control_hz(), g.queue_depth()), (None, None));
         assert!(g
-            .chain_for("--control-hz")
+            .chain_for("--control-hz", crate::setting::Speech::Flags)
             .unwrap_err()
             .0
             .starts_with("--control-hz speaks of the chapter's chain"));

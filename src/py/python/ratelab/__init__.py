@@ -443,10 +443,12 @@ def _native_call(fn: Callable, *args: Any) -> Any:
     except _native.NoPrediction as e:
         raise NoPrediction(str(e)) from None
     except (ValueError, TypeError) as e:
+        # The cause, when there is one, is the learner's own exception (a brain file whose
+        # import failed), kept with its traceback; else none (the native frame says nothing).
         if type(e) is ValueError:
-            raise SettingError(str(e)) from None
+            raise SettingError(str(e)) from e.__cause__
         if type(e) is TypeError:
-            raise SettingTypeError(str(e)) from None
+            raise SettingTypeError(str(e)) from e.__cause__
         raise  # already of their own kind
 
 
@@ -514,34 +516,53 @@ class _Trace:
         run.__dict__["trace"] = value
 
 
-@dataclass(frozen=True, repr=False)
+@dataclass(frozen=True, repr=False, eq=False)
 class Run:
     """One run's results, as `ratelab run --out` writes them. Printed, it says how the run
     ended (`<ratelab.Run balanced 10.0 s, control 50 Hz, seed 0, virtual clock>`); in
-    Jupyter it is a table of its headline figures."""
+    Jupyter it is a table of its headline figures.
 
-    #: `metrics.json` as a dict (docs/metrics.md).
+    Two runs are equal (`==`) when they wrote the same `metrics.json`, `trace.csv` and log,
+    byte for byte: under the virtual clock, the same settings and seed give equal runs. The
+    wall time and the recording's path are not compared.
+
+    Attributes:
+        metrics: `metrics.json` as a dict (docs/metrics.md).
+        trace: `trace.csv`'s columns as NumPy arrays, one value per actuator step (with
+            `trace_every=N`, per N-th step and the last), named as `TRACE_COLUMNS` says
+            (units in the names). Made when first asked for (NumPy is imported then).
+        log: `log.txt`'s lines: what the nodes wrote (`print` in a brain or node included),
+            stamped `[t=1.234 s node]`.
+        summary: The summary `ratelab run` prints (without the wall time).
+        recording: The recording written (`record=`), or None.
+        metrics_json: `metrics.json`'s exact text.
+        trace_csv: `trace.csv`'s exact text.
+        wall_s: The wall time the run itself took, s (`ratelab run`'s summary's `wall`).
+        estimator: With an estimator in the graph, `estimator.json` as a dict: its RMS error
+            per state component (m, m/s, rad, rad/s) and its lag, ms, against the plant's
+            true state (docs/metrics.md); None without one.
+    """
+
     metrics: Dict[str, Any]
-    #: `trace.csv`'s columns as NumPy arrays, one value per actuator step (with
-    #: `trace_every=N`, per N-th step and the last), named as `TRACE_COLUMNS` says (units in
-    #: the names). Made when first asked for (NumPy is imported then).
     trace: Dict[str, Any] = _Trace()
-    #: `log.txt`'s lines: what the nodes wrote, stamped `[t=1.234 s node]`.
     log: List[str]
-    #: The summary `ratelab run` prints (without the wall time).
     summary: List[str]
-    #: The recording written (`record=`), or None.
     recording: Optional[str]
-    #: `metrics.json`'s exact text.
     metrics_json: str
-    #: `trace.csv`'s exact text.
     trace_csv: str
-    #: The wall time the run itself took, s (`ratelab run`'s summary's `wall`).
     wall_s: float
-    #: With an estimator in the graph, `estimator.json` as a dict: its RMS error per state
-    #: component (m, m/s, rad, rad/s) and its lag, ms, against the plant's true state
-    #: (docs/metrics.md); None without one.
     estimator: Optional[Dict[str, Any]] = None
+
+    def _written(self) -> Tuple[str, str, Tuple[str, ...]]:
+        return (self.metrics_json, self.trace_csv, tuple(self.log))
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Run):
+            return NotImplemented
+        return self._written() == other._written()
+
+    def __hash__(self) -> int:
+        return hash(self._written())
 
     @property
     def balanced(self) -> bool:
