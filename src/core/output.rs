@@ -41,13 +41,19 @@ pub enum OutputError {
         path: PathBuf,
         /// The OS's reason.
         detail: String,
+        /// Its kind (a front end says it in its own terms: Python's `PermissionError`).
+        kind: std::io::ErrorKind,
     },
 }
 
-fn io_err(path: &Path, e: &std::io::Error) -> OutputError {
-    OutputError::Io {
-        path: path.to_path_buf(),
-        detail: e.to_string(),
+impl OutputError {
+    /// [`OutputError::Io`] for `e`, met writing `path`.
+    pub fn io(path: &Path, e: &std::io::Error) -> OutputError {
+        OutputError::Io {
+            path: path.to_path_buf(),
+            detail: e.to_string(),
+            kind: e.kind(),
+        }
     }
 }
 
@@ -59,7 +65,7 @@ fn io_err(path: &Path, e: &std::io::Error) -> OutputError {
 pub fn check_target(path: &Path, force: bool) -> Result<(), OutputError> {
     match std::fs::symlink_metadata(path) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => Err(io_err(path, &e)),
+        Err(e) => Err(OutputError::io(path, &e)),
         Ok(m) if m.file_type().is_symlink() => Err(OutputError::Symlink(path.to_path_buf())),
         Ok(m) if !m.file_type().is_file() => Err(OutputError::NotRegular {
             path: path.to_path_buf(),
@@ -123,6 +129,7 @@ impl PendingFile {
             .ok_or_else(|| OutputError::Io {
                 path: dest.to_path_buf(),
                 detail: "not a file name".into(),
+                kind: std::io::ErrorKind::InvalidInput,
             })?
             .to_string_lossy()
             .into_owned();
@@ -130,7 +137,7 @@ impl PendingFile {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
             _ => PathBuf::from("."),
         };
-        std::fs::create_dir_all(&dir).map_err(|e| io_err(dest, &e))?;
+        std::fs::create_dir_all(&dir).map_err(|e| OutputError::io(dest, &e))?;
         let tmp = dir.join(format!(
             ".{name}.{}-{}.tmp",
             std::process::id(),
@@ -141,7 +148,7 @@ impl PendingFile {
             .create_new(true)
             .mode(mode)
             .open(&tmp)
-            .map_err(|e| io_err(dest, &e))?;
+            .map_err(|e| OutputError::io(dest, &e))?;
         Ok((
             Self {
                 tmp,
@@ -182,7 +189,8 @@ impl PendingFile {
     fn move_into_place(&self) -> Result<(), OutputError> {
         check_target(&self.dest, self.force)?;
         if self.force {
-            return std::fs::rename(&self.tmp, &self.dest).map_err(|e| io_err(&self.dest, &e));
+            return std::fs::rename(&self.tmp, &self.dest)
+                .map_err(|e| OutputError::io(&self.dest, &e));
         }
         match std::fs::hard_link(&self.tmp, &self.dest) {
             Ok(()) => Ok(()),
@@ -191,9 +199,9 @@ impl PendingFile {
             }
             // A file system without hard links: checked just above, rename.
             Err(e) if matches!(e.raw_os_error(), Some(libc::EPERM | libc::EOPNOTSUPP)) => {
-                std::fs::rename(&self.tmp, &self.dest).map_err(|e| io_err(&self.dest, &e))
+                std::fs::rename(&self.tmp, &self.dest).map_err(|e| OutputError::io(&self.dest, &e))
             }
-            Err(e) => Err(io_err(&self.dest, &e)),
+            Err(e) => Err(OutputError::io(&self.dest, &e)),
         }
     }
 }
@@ -229,9 +237,11 @@ fn write_with_mode(
     let mut w = std::io::BufWriter::new(file);
     fill(&mut w)
         .and_then(|()| w.flush())
-        .map_err(|e| io_err(path, &e))?;
-    let file = w.into_inner().map_err(|e| io_err(path, e.error()))?;
-    file.sync_all().map_err(|e| io_err(path, &e))?;
+        .map_err(|e| OutputError::io(path, &e))?;
+    let file = w
+        .into_inner()
+        .map_err(|e| OutputError::io(path, e.error()))?;
+    file.sync_all().map_err(|e| OutputError::io(path, &e))?;
     drop(file);
     pending.commit()
 }

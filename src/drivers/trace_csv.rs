@@ -337,7 +337,7 @@ impl TraceFile {
         every: u64,
     ) -> Result<Self, OutputError> {
         let (pending, file) = PendingFile::create(path, force)?;
-        let stream = TraceStream::new(file, graph, every).map_err(|e| io_error(path, &e))?;
+        let stream = TraceStream::new(file, graph, every).map_err(|e| OutputError::io(path, &e))?;
         Ok(Self { pending, stream })
     }
 
@@ -358,17 +358,10 @@ impl TraceFile {
             stream,
         } = self;
         let path = pending.path().to_path_buf();
-        let file = stream.finish().map_err(|e| io_error(&path, &e))?;
-        file.sync_all().map_err(|e| io_error(&path, &e))?;
+        let file = stream.finish().map_err(|e| OutputError::io(&path, &e))?;
+        file.sync_all().map_err(|e| OutputError::io(&path, &e))?;
         drop(file);
         pending.commit()
-    }
-}
-
-fn io_error(path: &Path, e: &std::io::Error) -> OutputError {
-    OutputError::Io {
-        path: path.to_path_buf(),
-        detail: e.to_string(),
     }
 }
 

@@ -129,22 +129,44 @@ fn to_py(e: &anyhow::Error) -> PyErr {
             }
             // The file system refused (`out="/proc"`, a full or read-only disk), as a
             // recording's refusal is said: not a setting.
-            if let ratelab::output::OutputError::Io { .. } = o {
-                return PyOSError::new_err(text);
+            if let ratelab::output::OutputError::Io { kind, .. } = o {
+                return os_error(*kind, text);
             }
         }
         if let Some(io) = cause.downcast_ref::<std::io::Error>() {
-            match io.kind() {
-                std::io::ErrorKind::NotFound => return PyFileNotFoundError::new_err(text),
-                std::io::ErrorKind::PermissionDenied => return PyPermissionError::new_err(text),
-                std::io::ErrorKind::IsADirectory => return PyIsADirectoryError::new_err(text),
-                std::io::ErrorKind::NotADirectory => return PyNotADirectoryError::new_err(text),
-                // The file system refused (a full disk, a read-only one): not a setting.
-                _ => return PyOSError::new_err(text),
+            return os_error(io.kind(), text);
+        }
+        // A policy path that names a folder, or a file it may not read: Python's own kinds.
+        if let Some(p) = cause.downcast_ref::<ratelab::checkpoint::PolicyError>() {
+            use ratelab::checkpoint::PolicyError;
+            use ratelab::input::InputError;
+            match p {
+                PolicyError::NotAFile(path) if path.is_dir() => {
+                    return PyIsADirectoryError::new_err(text)
+                }
+                PolicyError::Unreadable(InputError::PermissionDenied(_)) => {
+                    return PyPermissionError::new_err(text)
+                }
+                _ => {}
             }
         }
     }
     PyValueError::new_err(text)
+}
+
+/// The OS error of `kind` as Python's subclass of `OSError` for it (`PermissionError`,
+/// `FileNotFoundError`, …), with the library's one line; a kind without one (a full disk, a
+/// read-only one) a plain `OSError`: the file system refused, not a setting.
+fn os_error(kind: std::io::ErrorKind, text: String) -> PyErr {
+    use std::io::ErrorKind;
+    match kind {
+        ErrorKind::NotFound => PyFileNotFoundError::new_err(text),
+        ErrorKind::PermissionDenied => PyPermissionError::new_err(text),
+        ErrorKind::IsADirectory => PyIsADirectoryError::new_err(text),
+        ErrorKind::NotADirectory => PyNotADirectoryError::new_err(text),
+        ErrorKind::AlreadyExists => PyFileExistsError::new_err(text),
+        _ => PyOSError::new_err(text),
+    }
 }
 
 /// Do `work` on a thread of its own, its Python output going to the run's text log, while

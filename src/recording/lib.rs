@@ -405,7 +405,7 @@ impl From<ratelab_core::output::OutputError> for RecordingError {
                 path,
                 kind: "a folder",
             } => RecordingError::IsDirectory(path),
-            OutputError::Io { path, detail } => RecordingError::Unwritable { path, detail },
+            OutputError::Io { path, detail, .. } => RecordingError::Unwritable { path, detail },
             other => RecordingError::Output(other),
         }
     }
@@ -1220,6 +1220,7 @@ mod tests {
         let full = RecordingError::from(OutputError::Io {
             path: p(),
             detail: "No space left on device".into(),
+            kind: std::io::ErrorKind::StorageFull,
         });
         for speech in [Speech::Flags, Speech::Keywords] {
             assert_eq!(

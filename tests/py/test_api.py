@@ -234,10 +234,18 @@ def test_a_recording_or_out_folder_refused_names_the_keyword_and_raises_its_kind
     assert str(e.value).startswith("record: ") and "--record" not in str(e.value), str(e.value)
     blocker = tmp_path / "a-file"
     blocker.write_bytes(b"")
-    with pytest.raises(OSError) as e:
+    with pytest.raises(NotADirectoryError) as e:
         ratelab.run(duration_s=0.2, out=blocker / "sub", **VIRTUAL)
     assert "cannot create out folder" in str(e.value), str(e.value)
     assert "--out" not in str(e.value), str(e.value)
+    # The OS's reason as Python's own kind of OSError (it was a plain OSError): /proc has
+    # no such file to make; a folder given as the policy is a folder.
+    with pytest.raises(FileNotFoundError) as e:
+        ratelab.run(duration_s=0.2, out="/proc", **VIRTUAL)
+    assert "/proc/" in str(e.value) and "--out" not in str(e.value), str(e.value)
+    with pytest.raises(IsADirectoryError) as e:
+        ratelab.run(duration_s=0.2, policy=tmp_path, **VIRTUAL)
+    assert str(tmp_path) in str(e.value), str(e.value)
 
 
 def test_a_brain_that_raises_fails_its_node_and_keeps_the_figures():
