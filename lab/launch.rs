@@ -262,15 +262,40 @@ fn launch_unwatched(
 
 /// The placement as one line: `robot [sensor, actuator], policy [policy]`.
 fn placement_line(spec: &ratelab::graph::GraphSpec) -> String {
-    spec.placement()
+    let placement = spec.placement();
+    // A large graph's line stays readable: its first nodes in each process, the rest
+    // counted (`ratelab top` lists them all), and past PLACED_PROCESSES processes, a count.
+    let per_process = match placement.len() {
+        0..=3 => ratelab::text::LISTED_NAMES,
+        _ => PLACED_NAMES_MANY,
+    };
+    let mut line = placement
         .iter()
+        .take(PLACED_PROCESSES)
         .map(|(p, ids)| {
-            let names: Vec<&str> = ids.iter().map(|i| spec.node(*i).name.as_str()).collect();
-            format!("{p} [{}]", names.join(", "))
+            let names = ids.iter().map(|i| spec.node(*i).name.as_str());
+            format!(
+                "{p} [{}]",
+                ratelab::text::listed_at_most(names, per_process)
+            )
         })
         .collect::<Vec<_>>()
-        .join(", ")
+        .join(", ");
+    if let Some(more) = placement
+        .len()
+        .checked_sub(PLACED_PROCESSES)
+        .filter(|n| *n > 0)
+    {
+        line.push_str(&format!(" and {more} more processes"));
+    }
+    line
 }
+
+/// The most processes the launch's placement line names.
+const PLACED_PROCESSES: usize = 16;
+/// The most nodes of each process the placement line names in a launch of 4 processes or
+/// more (of 3 or fewer, [`ratelab::text::LISTED_NAMES`]).
+const PLACED_NAMES_MANY: usize = 4;
 
 /// A crossing topic's time on the wire, as the summary says it (a process that rejoined
 /// counts from its rejoin, and the line says so, at the time the launcher's line and the

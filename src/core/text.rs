@@ -91,10 +91,16 @@ pub const LISTED_NAMES: usize = 12;
 /// then `and N more` (a program may register a thousand kinds or message types, and a
 /// refusal stays one readable line). Each name is made [`printable`].
 pub fn listed<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
-    let mut shown = Vec::with_capacity(LISTED_NAMES);
+    listed_at_most(names, LISTED_NAMES)
+}
+
+/// [`listed`] with the first `most` names written (at least one).
+pub fn listed_at_most<'a>(names: impl IntoIterator<Item = &'a str>, most: usize) -> String {
+    let most = most.max(1);
+    let mut shown = Vec::with_capacity(most.min(LISTED_NAMES));
     let mut more = 0usize;
     for name in names {
-        if shown.len() < LISTED_NAMES {
+        if shown.len() < most {
             shown.push(printable(name));
         } else {
             more += 1;
@@ -110,6 +116,15 @@ pub fn listed<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_list_names_its_first_few_and_counts_the_rest() {
+        let names = ["a", "b", "c", "d"];
+        assert_eq!(listed_at_most(names, 2), "a, b and 2 more");
+        assert_eq!(listed_at_most(names, 4), "a, b, c, d");
+        assert_eq!(listed_at_most(names, 0), "a and 3 more");
+        assert_eq!(listed(names), "a, b, c, d");
+    }
 
     #[test]
     fn a_library_message_is_one_line_without_its_source_places() {

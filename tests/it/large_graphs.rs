@@ -36,6 +36,10 @@ fn launched(graph: &str, args: &[&str], dir: &Path, processes: usize) -> String 
     assert!(o.status.success(), "{out}{}", text(&o.stderr));
     let placed = format!("in {processes} processes: robot [");
     assert!(out.contains(&placed), "{out:.2000}");
+    // The placement line names each process's first nodes and counts the rest (it was
+    // every name: 1,000 of them on one line).
+    let line = out.lines().find(|l| l.contains(&placed)).unwrap();
+    assert!(line.len() < 1000 && line.contains(" more]"), "{line:.2000}");
     std::fs::read_to_string(dir.join("metrics.json")).unwrap()
 }
 
