@@ -411,6 +411,17 @@ def in_a_fresh_interpreter(code):
     return done.stdout
 
 
+def test_a_run_printed_says_what_a_fault_on_the_actuator_did():
+    # As the summary says it: the plant stood still meanwhile (it said "balanced" alone).
+    stalled = ratelab.run(duration_s=1.0, stall={"actuator": (0.0, 1.0)}, **VIRTUAL)
+    assert repr(stalled).startswith(
+        "<ratelab.Run balanced while the plant ran 1.0 s (the actuator lost 50 ticks)"
+    ), repr(stalled)
+    killed = ratelab.run(duration_s=1.0, kill={"actuator": 0.5}, **VIRTUAL)
+    assert repr(killed).startswith("<ratelab.Run actuator killed at 0.50 s"), repr(killed)
+    assert repr(ratelab.run(duration_s=1.0, **VIRTUAL)).startswith("<ratelab.Run balanced 1.0 s")
+
+
 def test_runs_compare_by_what_they_wrote():
     # A learner checks "same seed, same run" with `==` (it raised: the dataclass compared
     # dicts of arrays), and may keep runs in a set.

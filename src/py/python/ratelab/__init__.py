@@ -470,10 +470,27 @@ def _outcome(metrics: Mapping[str, Any]) -> str:
         return f"fell at {metrics['fell_at_s']:.2f} s"
     if metrics.get("stopped_by_watchdog"):
         return f"stopped by watchdog{at_s}"
+    # A fault on the actuator stands the plant still: said, as the summary says it.
+    killed_at, lost = _actuator_faults(metrics)
+    if killed_at is not None:
+        return f"actuator killed at {killed_at:.2f} s"
     if metrics.get("balanced"):
         ran = at if isinstance(at, (int, float)) else metrics.get("duration_s", 0.0)
+        if lost:
+            return f"balanced while the plant ran {ran:.1f} s (the actuator lost {lost} ticks)"
         return f"balanced {ran:.1f} s"
     return f"not balanced{at_s}"
+
+
+def _actuator_faults(metrics: Mapping[str, Any]) -> Tuple[Optional[float], int]:
+    """The actuator's faults in `metrics["nodes"]`: when it was killed (a fault without a
+    duration; None if never) and how many ticks faults took from it."""
+    for node in (metrics.get("nodes") or {}).values():
+        if isinstance(node, dict) and node.get("kind") == "actuator":
+            faults = node.get("faults") or []
+            kills = [f["at_s"] for f in faults if "duration_s" not in f and "at_s" in f]
+            return (min(kills) if kills else None), int(node.get("faulted_ticks") or 0)
+    return None, 0
 
 
 #: The figures `Run`'s HTML table shows, in order, where the metrics have them.
