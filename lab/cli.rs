@@ -338,7 +338,8 @@ pub struct GraphArgs {
     pub depths: Vec<(String, usize)>,
     /// Set a topic's QoS with the graph file's keys (repeatable):
     /// --qos /obs:history=keep_last,depth=100,delivery=fifo  --qos /action:deadline_ms=40,lifespan_ms=60.
-    /// Keys: history, depth, delivery, deadline_ms, lifespan_ms, reliability, on_deadline_missed.
+    /// Keys: history, depth, delivery, deadline_ms, lifespan_ms, reliability, durability,
+    /// on_deadline_missed.
     #[arg(long = "qos", value_name = "TOPIC:KEY=VALUE,…", value_parser = parse_topic_pairs)]
     pub qos: Vec<(String, String)>,
     /// Put a topic on a seeded lossy link (repeatable): --link /cmd:loss=0.2,delay_ms=10,jitter_ms=3

@@ -384,7 +384,7 @@ fn word<E: serde::de::DeserializeOwned>(key: &str, value: &str) -> Result<E, Str
 /// comma or an equals sign).
 ///
 /// # Errors
-/// A one-line reason for a pair without `=` or an empty list.
+/// A one-line reason for a pair without `=`, a key given twice, or an empty list.
 pub fn split_pairs(list: &str) -> Result<Vec<(&str, &str)>, String> {
     let pairs = list
         .split(',')
@@ -397,6 +397,11 @@ pub fn split_pairs(list: &str) -> Result<Vec<(&str, &str)>, String> {
         .collect::<Result<Vec<_>, _>>()?;
     if pairs.is_empty() {
         return Err("expected KEY=VALUE[,KEY=VALUE…]".into());
+    }
+    // A key twice would have the last win unseen (`depth=3,depth=5`): refused, naming it.
+    let mut seen = std::collections::HashSet::with_capacity(pairs.len());
+    if let Some((k, _)) = pairs.iter().find(|(k, _)| !seen.insert(*k)) {
+        return Err(format!("'{}' is given twice", crate::text::printable(k)));
     }
     Ok(pairs)
 }
@@ -721,6 +726,15 @@ mod tests {
     }
 
     #[test]
+    fn a_key_given_twice_is_refused_naming_it() {
+        assert_eq!(
+            set("depth=3,depth=5").unwrap_err(),
+            "'depth' is given twice"
+        );
+        assert_eq!(set("depth=3, reliability=reliable").unwrap().1, 3);
+    }
+
+    #[test]
     fn a_fault_takes_effect_from_its_instant_a_stall_ending_when_set_to() {
         let ms = |m: u64| Nanos(m * 1_000_000);
         let stall = Fault::parse("policy@2+0.5", false).unwrap();
@@ -767,8 +781,11 @@ mod tests {
             "an explicit timeout stays"
         );
         assert_eq!(q.short(1), "KL1 latest link 0%");
-        let (q, _) =
-            set("deadline_ms=40,lifespan_ms=50,deadline_ms=none,lifespan_ms=none").unwrap();
+        // `none` turns them off (a later `--qos` on a topic whose graph file set them).
+        let (mut q, mut d) = set("deadline_ms=40,lifespan_ms=50").unwrap();
+        for (k, v) in split_pairs("deadline_ms=none,lifespan_ms=none").unwrap() {
+            apply_key(&mut q, &mut d, k, v).unwrap();
+        }
         assert_eq!((q.deadline, q.lifespan), (None, None));
     }
 
