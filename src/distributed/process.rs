@@ -98,6 +98,29 @@ pub(super) const CALLBACK_SEND_BUDGET: i64 = 4 * 1024;
 /// process is refused after this.
 pub const BUSY_RETRY: Duration = Duration::from_secs(5);
 
+/// The publisher of `process`'s live figures for `ratelab top` and `ratelab lab --attach`,
+/// every [`STATS_PERIOD`] and once more after the run (its last steps). Dropped under
+/// congestion (Zenoh's default): a watcher that stalls must never hold up the run or its
+/// reports. And at Zenoh's lowest priority, `Background`: each priority has its own queue
+/// of batches on a link, so a large graph's figures (hundreds of KB, in pieces, every
+/// 100 ms) never fill the queue the run's own messages need. At the default priority they
+/// did: under the virtual clock the ticks run, and put messages that must arrive, on the
+/// one Zenoh thread that empties that queue, so with a watcher attached a put found it
+/// full, Zenoh closed the link after 5 s and the process read its launcher gone.
+///
+/// # Errors
+/// [`DistError::Zenoh`] when it cannot be declared.
+fn stats_publisher(
+    session: &zenoh::Session,
+    keys: &Keys,
+    process: &str,
+) -> Result<zenoh::pubsub::Publisher<'static>, DistError> {
+    Ok(session
+        .declare_publisher(keys.stats(process))
+        .priority(zenoh::qos::Priority::Background)
+        .wait()?)
+}
+
 /// Run process `opts.process` until the launcher ends the run (or `stop`).
 ///
 /// # Errors
@@ -187,20 +210,7 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     let ticks: Arc<Vec<AtomicU64>> =
         Arc::new((0..spec.nodes.len()).map(|_| AtomicU64::new(0)).collect());
     let run_time = Arc::new(AtomicU64::new(0));
-    // Live counters for `ratelab top` and `ratelab lab --attach`, every [`STATS_PERIOD`],
-    // and once more after the run (its last steps).
-    // Dropped under congestion (Zenoh's default): a watcher that stalls must never hold up
-    // the run or its reports. And at Zenoh's lowest priority, `Background`: each priority
-    // has its own queue of batches on a link, so figures of a large graph (hundreds of KB,
-    // in pieces, every 100 ms) never fill the queue the run's own messages need. At the
-    // default priority they did: under the virtual clock the ticks run, and put their
-    // messages that must arrive, on the one Zenoh thread that empties that queue, so with a
-    // watcher attached (`ratelab top`) a put found it full, Zenoh closed the link after 5 s
-    // and the process read its launcher gone.
-    let stats_pub = session
-        .declare_publisher(keys.stats(&opts.process))
-        .priority(zenoh::qos::Priority::Background)
-        .wait()?;
+    let stats_pub = stats_publisher(&session, &keys, &opts.process)?;
     let share = Arc::new(Share {
         process: opts.process.clone(),
         cfg,
