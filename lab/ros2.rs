@@ -730,10 +730,7 @@ fn echo_topic(
 /// # Errors
 /// One line when `S` is not a number or not in the range.
 fn time_limit(s: &str) -> Result<Duration, String> {
-    match s.trim().parse::<f64>() {
-        Ok(x) if x.is_finite() && x > 0.0 && x <= 1e6 => Ok(Duration::from_secs_f64(x)),
-        _ => Err("must be a number of seconds in (0, 1000000]".into()),
-    }
+    seconds_in(s, (false, 1e6))
 }
 
 /// `--wait S`: seconds in [0, 3600], as [`time_limit`].
@@ -741,9 +738,18 @@ fn time_limit(s: &str) -> Result<Duration, String> {
 /// # Errors
 /// One line when `S` is not a number or not in the range.
 fn wait_s(s: &str) -> Result<Duration, String> {
+    seconds_in(s, (true, 3600.0))
+}
+
+/// `s` as seconds from 0 (taken when `zero`, else excluded) up to `max`, inclusive.
+fn seconds_in(s: &str, (zero, max): (bool, f64)) -> Result<Duration, String> {
     match s.trim().parse::<f64>() {
-        Ok(x) if (0.0..=3600.0).contains(&x) => Ok(Duration::from_secs_f64(x)),
-        _ => Err("must be a number of seconds in [0, 3600]".into()),
+        Ok(x) if (x > 0.0 || (zero && x == 0.0)) && x <= max => Ok(Duration::from_secs_f64(x)),
+        _ => Err(format!(
+            "must be a number of seconds in {}0, {}]",
+            if zero { "[" } else { "(" },
+            ratelab::text::number(max)
+        )),
     }
 }
 
@@ -834,19 +840,18 @@ fn bag(verb: &BagVerb, stop: &StopFlag) -> Result<()> {
             let b = Bag::open(dir).map_err(|e| anyhow!(e))?;
             let mut printed = 0u64;
             let mut failed = None;
-            // The topics of the messages passed over (the first few, and whether there are
-            // more), to name when `--topic` matched none.
-            let (mut others, mut more) = (std::collections::BTreeSet::new(), false);
+            // The topics of the messages passed over, to name when `--topic` matched none
+            // (as many as the bag's channels, each read once), and whether it matched any.
+            let (mut others, mut matched) = (std::collections::BTreeSet::new(), false);
             let note = b
                 .messages(&stopped, |m| {
                     if topic.as_deref().is_some_and(|want| want != m.topic) {
-                        if others.len() < ratelab::text::LISTED_NAMES {
+                        if !others.contains(m.topic) {
                             others.insert(m.topic.to_string());
-                        } else {
-                            more |= !others.contains(m.topic);
                         }
                         return true;
                     }
+                    matched = true;
                     if count.is_some_and(|n| printed >= n) {
                         return false;
                     }
@@ -878,13 +883,12 @@ fn bag(verb: &BagVerb, stop: &StopFlag) -> Result<()> {
             if let Some(n) = &note {
                 eprintln!("ratelab: {n}");
             }
-            if let (Some(want), 0, None) = (topic, printed, note) {
+            if let (Some(want), false, None) = (topic, matched, note) {
                 let named = ratelab::text::listed(others.iter().map(String::as_str));
                 return Err(anyhow!(
-                    "no messages on {} in this bag (its topics: {}{})",
+                    "no messages on {} in this bag (its topics: {})",
                     ratelab::text::printable(want),
                     if others.is_empty() { "none" } else { &named },
-                    if more { ", …" } else { "" }
                 ));
             }
         }

@@ -100,8 +100,10 @@ fn to_py(e: &anyhow::Error) -> PyErr {
         if let Some(i) = cause.downcast_ref::<ratelab::input::InputError>() {
             use ratelab::input::InputError;
             match i {
-                InputError::NotFound(_) => return PyFileNotFoundError::new_err(text),
-                InputError::PermissionDenied(_) => return PyPermissionError::new_err(text),
+                InputError::NotFound(_) => return os_error(std::io::ErrorKind::NotFound, text),
+                InputError::PermissionDenied(_) => {
+                    return os_error(std::io::ErrorKind::PermissionDenied, text)
+                }
                 _ => {}
             }
         }
@@ -145,7 +147,7 @@ fn to_py(e: &anyhow::Error) -> PyErr {
                     return PyIsADirectoryError::new_err(text)
                 }
                 PolicyError::Unreadable(InputError::PermissionDenied(_)) => {
-                    return PyPermissionError::new_err(text)
+                    return os_error(std::io::ErrorKind::PermissionDenied, text)
                 }
                 _ => {}
             }
@@ -166,6 +168,29 @@ fn os_error(kind: std::io::ErrorKind, text: String) -> PyErr {
         ErrorKind::NotADirectory => PyNotADirectoryError::new_err(text),
         ErrorKind::AlreadyExists => PyFileExistsError::new_err(text),
         _ => PyOSError::new_err(text),
+    }
+}
+
+/// One run, sweep, cliff search or exercise of this process at a time: a second call from
+/// another thread waits for the first (the interpreter let go meanwhile, Ctrl-C heard). A
+/// run's text log, its failed node's exception and the node classes given to it are the
+/// process's while it goes (`ratelab_core::textlog`'s sink, `ratelab::python`'s failure and
+/// classes), so two at once would mix their logs.
+///
+/// # Errors
+/// KeyboardInterrupt while waiting.
+fn one_at_a_time(py: Python<'_>) -> PyResult<std::sync::MutexGuard<'static, ()>> {
+    static ONE: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    loop {
+        match ONE.try_lock() {
+            Ok(guard) => return Ok(guard),
+            // A run that panicked left nothing of its own behind the lock.
+            Err(std::sync::TryLockError::Poisoned(p)) => return Ok(p.into_inner()),
+            Err(std::sync::TryLockError::WouldBlock) => {
+                py.detach(|| std::thread::sleep(SIGNAL_POLL / 5));
+                py.check_signals()?;
+            }
+        }
     }
 }
 
@@ -277,6 +302,7 @@ fn sweep<'py>(
     grid: &Bound<'py, PyDict>,
     brain: Option<Py<PyAny>>,
 ) -> PyResult<(String, Option<String>)> {
+    let _one = one_at_a_time(py)?;
     let spec = run_spec::sweep_from(settings, grid)?;
     let brains = brain.map(|f| callable_brains(py, f)).transpose()?;
     let done = interruptibly(py, move |stop| {
@@ -306,6 +332,7 @@ fn cliff<'py>(
     search: &Bound<'py, PyDict>,
     brain: Option<Py<PyAny>>,
 ) -> PyResult<String> {
+    let _one = one_at_a_time(py)?;
     let spec = run_spec::cliff_from(settings, search)?;
     let brains = brain.map(|f| callable_brains(py, f)).transpose()?;
     let done = interruptibly(py, move |stop| {
@@ -337,6 +364,7 @@ fn exercise<'py>(
     settings: &Bound<'py, PyDict>,
     prediction_json: Option<String>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let _one = one_at_a_time(py)?;
     let prediction: Option<toml::Table> = prediction_json
         .map(|json| serde_json::from_str(&json))
         .transpose()
@@ -403,6 +431,7 @@ fn run<'py>(
     policy: Option<Py<PyAny>>,
     nodes: Vec<(String, Py<PyAny>)>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let _one = one_at_a_time(py)?;
     let spec = run_spec::from_settings(settings)?;
     let classes: Vec<String> = nodes.iter().map(|(n, _)| n.clone()).collect();
     let _given = ratelab::python::node::give_classes(nodes);
@@ -425,9 +454,12 @@ fn run<'py>(
     .inspect_err(|e| {
         // Refused for a Python exception (a brain file's import failing, a node class's
         // `__init__` raising): that exception, with its traceback, is the cause, as a
-        // failed node's is `NodeFailed`'s.
-        let cause = ratelab::python::take_failure();
-        if let Some(cause) = cause.filter(|_| !e.is_instance_of::<PyKeyboardInterrupt>(py)) {
+        // failed node's is `NodeFailed`'s. Only when the refusal says it: a node's exception
+        // is never the cause of an error that came after it (a recording left unwritten).
+        let said = e.value(py).str().map(|s| s.to_string()).unwrap_or_default();
+        if let Some((cause, _)) = ratelab::python::take_failure_said()
+            .filter(|(_, line)| !line.is_empty() && said.contains(line.as_str()))
+        {
             e.set_cause(py, Some(cause));
         }
     })?;

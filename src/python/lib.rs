@@ -123,8 +123,9 @@ pub fn host() {
 }
 
 /// While this lives, what Python code writes to `sys.stdout`/`sys.stderr` goes to the run's
-/// text log ([`ratelab_core::textlog`]), as in the `ratelab` binary; dropping it puts the streams
-/// back. For a host's interpreter ([`host`]); call it with the interpreter started.
+/// text log ([`ratelab_core::textlog`]), as in the `ratelab` binary; dropping the last one
+/// alive puts the streams back (captures at once share one, `support.py`'s
+/// `_capture_output`). For a host's interpreter ([`host`]); call it with the interpreter started.
 pub struct OutputCapture(Option<Py<PyAny>>);
 
 /// Start capturing the interpreter's output ([`OutputCapture`]).
@@ -242,15 +243,24 @@ fn log_line(level: &str, text: &str, node: Option<&str>, caller: Option<(String,
     }
 }
 
-/// The exception of the learner's code last described ([`describe`]): what failed a node or
-/// a brain, for a host to chain to its own error ([`take_failure`]).
-static LAST_FAILURE: Mutex<Option<PyErr>> = Mutex::new(None);
+/// The exception of the learner's code last described ([`describe`]), with the line it was
+/// described in: what failed a node or a brain, or refused a run (a brain file whose import
+/// failed), for a host to chain to its own error ([`take_failure`], [`take_failure_said`]).
+/// One for the process: a host runs one run at a time (`ratelab.run` holds a lock).
+static LAST_FAILURE: Mutex<Option<(PyErr, String)>> = Mutex::new(None);
 
 /// The Python exception last described ([`describe`]) since the last call, taken: the
 /// learner's code's own error with its traceback, which a host (`ratelab.run`) raises as the
 /// cause of its `NodeFailed`. Take it once before a run (to forget an earlier run's) and
 /// once after.
 pub fn take_failure() -> Option<PyErr> {
+    take_failure_said().map(|(e, _)| e)
+}
+
+/// [`take_failure`], with the one line [`describe`] said of it: a host chains the exception
+/// to an error of its own only when that error says this line (a refusal for it), never to
+/// an unrelated one that came after it.
+pub fn take_failure_said() -> Option<(PyErr, String)> {
     LAST_FAILURE
         .lock()
         .unwrap_or_else(|e| e.into_inner())
@@ -260,7 +270,14 @@ pub fn take_failure() -> Option<PyErr> {
 /// One line for a Python exception raised by code of `script` (see the module docs). The
 /// exception is kept for [`take_failure`].
 pub fn describe(py: Python<'_>, err: &PyErr, script: &str) -> String {
-    *LAST_FAILURE.lock().unwrap_or_else(|e| e.into_inner()) = Some(err.clone_ref(py));
+    let line = described_line(py, err, script);
+    *LAST_FAILURE.lock().unwrap_or_else(|e| e.into_inner()) =
+        Some((err.clone_ref(py), line.clone()));
+    line
+}
+
+/// [`describe`]'s line, made printable.
+fn described_line(py: Python<'_>, err: &PyErr, script: &str) -> String {
     let described = support(py).ok().and_then(|m| {
         // The traceback goes separately: before Python 3.12 a fetched exception's
         // `__traceback__` is not always set.

@@ -136,11 +136,13 @@ def _restore_output(prev):
         _capturing["runs"] = max(0, _capturing["runs"] - 1)
         if _capturing["runs"] > 0:
             return
-        for stream in (sys.stdout, sys.stderr):
-            if isinstance(stream, _Lines):
-                stream.flush_all()
-        sys.stdout, sys.stderr = _capturing["before"] or prev
-        _capturing["before"] = None
+        try:
+            for stream in (sys.stdout, sys.stderr):
+                if isinstance(stream, _Lines):
+                    stream.flush_all()
+        finally:  # the streams put back whatever logging the last lines did
+            sys.stdout, sys.stderr = _capturing["before"] or prev
+            _capturing["before"] = None
 
 
 def callable_brain(fn):
@@ -266,8 +268,8 @@ def brain_caller(module, function, script):
     # naming its own signature (not a line of ratelab's, at its first call).
     try:
         sig = inspect.signature(fn)
-    except (TypeError, ValueError):  # no signature Python can read: judged when called
-        sig = None
+    except Exception:  # no signature Python can read (a builtin; an annotation it cannot
+        sig = None  # resolve): judged when called
     if sig is not None:
         try:
             sig.bind(None)

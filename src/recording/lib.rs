@@ -1165,6 +1165,19 @@ impl Recording {
     pub fn flush(&self) -> Result<(), RecordingError> {
         self.lock().send(&self.rec);
         self.rec.flush_with_timeout(FLUSH_TIMEOUT).map_err(|e| {
+            if matches!(e, rerun::sink::SinkFlushError::Timeout) {
+                // A disk that takes no writes and refuses none: writing beside it would
+                // wait too, and so would the stream's own end (its drop flushes without a
+                // limit and joins its writer). The stream is left, never dropped.
+                std::mem::forget(self.rec.clone());
+                return RecordingError::Rerun {
+                    path: self.path.clone(),
+                    detail: format!(
+                        "the disk took no writes for {} s: cut short, what was written is kept and opens as a recording cut short",
+                        FLUSH_TIMEOUT.as_secs()
+                    ),
+                };
+            }
             // rerun's file writer says only that it stopped: the OS's reason is found by
             // writing beside the file (a full disk refuses that too).
             let why = self

@@ -485,6 +485,21 @@ fn bag_info_and_echo_read_ratelab_s_bags_rosbags_bags_and_bags_cut_short() {
         err.trim_end(),
         "error: no messages on /ob in this bag (its topics: /action, /clock, /obs, /parameter_events)"
     );
+    // A topic it has, with no message asked for (`-n 0`): nothing, and no refusal.
+    let (code, out, err) = ratelab(
+        &[
+            "ros2",
+            "bag",
+            "echo",
+            ours.to_str().unwrap(),
+            "--topic",
+            "/obs",
+            "-n",
+            "0",
+        ],
+        &[],
+    );
+    assert_eq!((code, out.as_str(), err.as_str()), (0, "", ""));
 
     // rosbags' writer: MCAP storage, times since 1970, no hashes.
     let theirs = dir.path().join("theirs");

@@ -183,7 +183,7 @@ fn a_topic_of_mixed_durability_falls_back_to_volatile_as_ros2cli_says() {
     let (code, _, err, _) = ros2(&["/mixed", "--timeout", "0"]);
     assert_eq!(code, 2, "{err}");
     assert!(
-        err.contains("--timeout must be in (0, 1000000] seconds"),
+        err.contains("'0' for '--timeout <S>': must be a number of seconds in (0, 1000000]"),
         "{err}"
     );
 }

@@ -415,10 +415,14 @@ def test_a_run_printed_says_what_a_fault_on_the_actuator_did():
     # As the summary says it: the plant stood still meanwhile (it said "balanced" alone).
     stalled = ratelab.run(duration_s=1.0, stall={"actuator": (0.0, 1.0)}, **VIRTUAL)
     assert repr(stalled).startswith(
-        "<ratelab.Run balanced while the plant ran 1.0 s (the actuator lost 50 ticks)"
+        "<ratelab.Run balanced while the plant ran (the actuator lost 50 ticks)"
     ), repr(stalled)
     killed = ratelab.run(duration_s=1.0, kill={"actuator": 0.5}, **VIRTUAL)
     assert repr(killed).startswith("<ratelab.Run actuator killed at 0.50 s"), repr(killed)
+    # A kill set after the run's end (warned of) did nothing: not said.
+    with pytest.warns(RuntimeWarning):
+        late = ratelab.run(duration_s=1.0, kill={"actuator": 20.0}, **VIRTUAL)
+    assert repr(late).startswith("<ratelab.Run balanced 1.0 s"), repr(late)
     assert repr(ratelab.run(duration_s=1.0, **VIRTUAL)).startswith("<ratelab.Run balanced 1.0 s")
 
 
@@ -438,17 +442,26 @@ def test_first_runs_from_two_threads_at_once_both_finish():
     # deadlocked there (one holding the interpreter while it waited for the other, which
     # needed the interpreter to finish), never to end. Each run as one thread alone.
     said = in_a_fresh_interpreter("\n".join([
-        "import faulthandler, threading, ratelab",
+        "import faulthandler, sys, threading, ratelab",
         "faulthandler.dump_traceback_later(60, exit=True)",
         "out = {}",
+        "def brain(tag):",
+        "    def act(obs):",
+        "        print(tag)",
+        "        return 0.0",
+        "    return act",
         "def go(seed):",
-        "    out[seed] = ratelab.run(clock='virtual', duration_s=0.5, seed=seed).metrics_json",
+        "    out[seed] = ratelab.run(clock='virtual', duration_s=0.5, seed=seed,",
+        "                            policy=brain(f'from-{seed}'))",
         "threads = [threading.Thread(target=go, args=(s,)) for s in (0, 1)]",
         "[t.start() for t in threads]; [t.join() for t in threads]",
-        "alone = ratelab.run(clock='virtual', duration_s=0.5, seed=1).metrics_json",
-        "print(len(out), out[1] == alone)",
+        "alone = ratelab.run(clock='virtual', duration_s=0.5, seed=1, policy=brain('from-1'))",
+        "mine = {s: [l for l in out[s].log if 'from-' in l] for s in (0, 1)}",
+        "own = all(mine[s] and all(f'from-{s}' in l for l in mine[s]) for s in (0, 1))",
+        "print(len(out), out[1] == alone, own, sys.stdout is sys.__stdout__)",
     ]))
-    assert said.split() == ["2", "True"], said
+    # Each run's log holds its own brain's lines alone, and stdout is put back after.
+    assert said.split() == ["2", "True", "True", "True"], said
 
 
 def test_import_ratelab_does_not_import_numpy():

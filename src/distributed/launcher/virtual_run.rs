@@ -104,7 +104,9 @@ impl Launch<'_> {
             wires,
         );
         drop(_figures);
-        for s in ratelab_runtime::graph::lock(&newest).values() {
+        // Taken out first: a late callback never waits while they are decoded.
+        let newest = std::mem::take(&mut *ratelab_runtime::graph::lock(&newest));
+        for s in newest.values() {
             if let Some(m) = LiveStats::from_sample(s) {
                 carried.see(spec, &m);
             }

@@ -337,13 +337,14 @@ pub(super) fn wait_subscribed(
                 .collect();
             match missing.is_empty() {
                 true => Ok(()),
-                false => Err(ratelab_core::text::listed(missing)),
+                false => Err(missing),
             }
         },
         |missing| {
             format!(
-                "not subscribed within {} s, linked directly: {missing} (a process announces its nodes once it has subscribed)",
-                patience.as_secs()
+                "not subscribed within {} s, linked directly: {} (a process announces its nodes once it has subscribed)",
+                patience.as_secs(),
+                ratelab_core::text::listed(missing)
             )
         },
     )
@@ -384,7 +385,9 @@ pub(super) fn wait_linked(
     )
 }
 
-/// Poll `ready` every `every` until it holds (`Ok`), the one loop of this module's waits.
+/// Poll `ready` every `every` until it holds (`Ok`): the loop of this module's waits for
+/// what the process hears of its peers ([`wait_matching`], [`wait_subscribed`],
+/// [`wait_linked`]).
 /// Its `Err` is what is still missing, said by `timed_out` once `deadline` (if any) passes.
 ///
 /// # Errors
@@ -514,7 +517,7 @@ mod tests {
     }
 
     #[test]
-    fn watching_the_launcher_a_wait_without_a_deadline_outlives_its_patience() {
+    fn a_wait_without_a_deadline_goes_on_until_ready_while_the_launcher_lives() {
         let (stop, gone) = (StopFlag::new(), StopFlag::new());
         let started = Instant::now();
         let mut polls = 0;

@@ -475,20 +475,26 @@ def _outcome(metrics: Mapping[str, Any]) -> str:
     if killed_at is not None:
         return f"actuator killed at {killed_at:.2f} s"
     if metrics.get("balanced"):
-        ran = at if isinstance(at, (int, float)) else metrics.get("duration_s", 0.0)
         if lost:
-            return f"balanced while the plant ran {ran:.1f} s (the actuator lost {lost} ticks)"
+            return f"balanced while the plant ran (the actuator lost {lost} ticks)"
+        ran = at if isinstance(at, (int, float)) else metrics.get("duration_s", 0.0)
         return f"balanced {ran:.1f} s"
     return f"not balanced{at_s}"
 
 
 def _actuator_faults(metrics: Mapping[str, Any]) -> Tuple[Optional[float], int]:
-    """The actuator's faults in `metrics["nodes"]`: when it was killed (a fault without a
-    duration; None if never) and how many ticks faults took from it."""
+    """The actuator's faults in `metrics["nodes"]`: when it was killed within the run (a
+    fault without a duration, at or before `sim_time_s`; None if never) and how many ticks
+    faults took from it."""
+    ended = metrics.get("sim_time_s")
     for node in (metrics.get("nodes") or {}).values():
         if isinstance(node, dict) and node.get("kind") == "actuator":
             faults = node.get("faults") or []
-            kills = [f["at_s"] for f in faults if "duration_s" not in f and "at_s" in f]
+            kills = [
+                f["at_s"] for f in faults
+                if "duration_s" not in f and "at_s" in f
+                and (not isinstance(ended, (int, float)) or f["at_s"] <= ended)
+            ]
             return (min(kills) if kills else None), int(node.get("faulted_ticks") or 0)
     return None, 0
 
@@ -887,7 +893,9 @@ def run(
     trace_every: Optional[int] = None,
 ) -> Run:
     """Run a graph, as `ratelab run` does, and return its figures. A setting left out (None)
-    is `ratelab run`'s default: the same defaults for every front end.
+    is `ratelab run`'s default: the same defaults for every front end. Calls from several
+    threads run one after another (a run's log and its Python output are the process's
+    while it goes); `sweep` and `cliff` spread their runs over the cores themselves.
 
     >>> import ratelab
     >>> run = ratelab.run(clock="virtual", duration_s=1)
