@@ -449,19 +449,12 @@ fn bag_info_and_echo_read_ratelab_s_bags_rosbags_bags_and_bags_cut_short() {
     ] {
         assert!(out.contains(needle), "{needle:?} in {out}");
     }
-    let (_, out, _) = ratelab(
-        &[
-            "ros2",
-            "bag",
-            "echo",
-            ours.to_str().unwrap(),
-            "--topic",
-            "/obs",
-            "-n",
-            "2",
-        ],
-        &[],
-    );
+    // `ratelab ros2 bag echo` of our bag, with `args` after it.
+    let echo_ours = |args: &[&str]| {
+        let bag = ours.to_str().unwrap();
+        ratelab(&[&["ros2", "bag", "echo", bag][..], args].concat(), &[])
+    };
+    let (_, out, _) = echo_ours(&["--topic", "/obs", "-n", "2"]);
     assert!(
         out.starts_with("# /obs at 0.000000000 s\nheader:\n"),
         "{out}"
@@ -469,36 +462,14 @@ fn bag_info_and_echo_read_ratelab_s_bags_rosbags_bags_and_bags_cut_short() {
     assert!(out.contains("# /obs at 0.020000000 s\n"), "{out}");
     assert_eq!(out.matches("---\n").count(), 2, "{out}");
     // A topic with no messages in the bag (a typo) is said, with the topics it has.
-    let (code, out, err) = ratelab(
-        &[
-            "ros2",
-            "bag",
-            "echo",
-            ours.to_str().unwrap(),
-            "--topic",
-            "/ob",
-        ],
-        &[],
-    );
+    let (code, out, err) = echo_ours(&["--topic", "/ob"]);
     assert_eq!((code, out.as_str()), (2, ""), "{err}");
     assert_eq!(
         err.trim_end(),
         "error: no messages on /ob in this bag (its topics: /action, /clock, /obs, /parameter_events)"
     );
     // A topic it has, with no message asked for (`-n 0`): nothing, and no refusal.
-    let (code, out, err) = ratelab(
-        &[
-            "ros2",
-            "bag",
-            "echo",
-            ours.to_str().unwrap(),
-            "--topic",
-            "/obs",
-            "-n",
-            "0",
-        ],
-        &[],
-    );
+    let (code, out, err) = echo_ours(&["--topic", "/obs", "-n", "0"]);
     assert_eq!((code, out.as_str(), err.as_str()), (0, "", ""));
 
     // rosbags' writer: MCAP storage, times since 1970, no hashes.

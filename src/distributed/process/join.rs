@@ -485,34 +485,15 @@ mod tests {
     fn a_wait_ends_on_a_stop_or_the_launcher_gone_but_not_once_met() {
         let (stop, gone) = (StopFlag::new(), StopFlag::new());
         gone.stop();
-        let never = || Err::<(), ()>(());
-        let e = said(poll_until(
-            &stop,
-            Some(&gone),
-            None,
-            NOW,
-            never,
-            |()| unreachable!(),
-        ));
+        // A wait watching the launcher, without a deadline, until `ready` holds.
+        let watching = |ready: Result<(), ()>| {
+            poll_until(&stop, Some(&gone), None, NOW, || ready, |()| unreachable!())
+        };
+        let e = said(watching(Err(())));
         assert!(e.contains("the launcher went away"), "{e}");
-        poll_until(
-            &stop,
-            Some(&gone),
-            None,
-            NOW,
-            || Ok::<(), ()>(()),
-            |()| unreachable!(),
-        )
-        .unwrap();
+        watching(Ok(())).unwrap();
         stop.stop();
-        let e = said(poll_until(
-            &stop,
-            Some(&gone),
-            None,
-            NOW,
-            never,
-            |()| unreachable!(),
-        ));
+        let e = said(watching(Err(())));
         assert!(e.contains("interrupted"), "{e}");
     }
 
