@@ -24,7 +24,8 @@
 
 use pyo3::exceptions::{
     PyFileExistsError, PyFileNotFoundError, PyIsADirectoryError, PyKeyboardInterrupt,
-    PyMemoryError, PyNotADirectoryError, PyOSError, PyPermissionError, PyValueError,
+    PyMemoryError, PyNotADirectoryError, PyOSError, PyPermissionError, PyRuntimeError,
+    PyValueError,
 };
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -178,8 +179,16 @@ fn os_error(kind: std::io::ErrorKind, text: String) -> PyErr {
 /// classes), so two at once would mix their logs.
 ///
 /// # Errors
-/// KeyboardInterrupt while waiting.
-fn one_at_a_time(py: Python<'_>) -> PyResult<std::sync::MutexGuard<'static, ()>> {
+/// KeyboardInterrupt while waiting; RuntimeError at once when called from inside a run's
+/// node or brain (`call`, e.g. `ratelab.run`, is what it says was called): the outer run
+/// holds the lock until that callback returns, so waiting would never end.
+fn one_at_a_time(py: Python<'_>, call: &str) -> PyResult<std::sync::MutexGuard<'static, ()>> {
+    if let Some(what) = ratelab::python::callback_of_this_thread() {
+        return Err(PyRuntimeError::new_err(format!(
+            "{call}() was called from inside a run ({what}): a run cannot start another \
+             one in the same process; call it after ratelab.run() returns"
+        )));
+    }
     static ONE: std::sync::Mutex<()> = std::sync::Mutex::new(());
     loop {
         match ONE.try_lock() {
@@ -302,7 +311,7 @@ fn sweep<'py>(
     grid: &Bound<'py, PyDict>,
     brain: Option<Py<PyAny>>,
 ) -> PyResult<(String, Option<String>)> {
-    let _one = one_at_a_time(py)?;
+    let _one = one_at_a_time(py, "ratelab.sweep")?;
     let spec = run_spec::sweep_from(settings, grid)?;
     let brains = brain.map(|f| callable_brains(py, f)).transpose()?;
     let done = interruptibly(py, move |stop| {
@@ -332,7 +341,7 @@ fn cliff<'py>(
     search: &Bound<'py, PyDict>,
     brain: Option<Py<PyAny>>,
 ) -> PyResult<String> {
-    let _one = one_at_a_time(py)?;
+    let _one = one_at_a_time(py, "ratelab.cliff")?;
     let spec = run_spec::cliff_from(settings, search)?;
     let brains = brain.map(|f| callable_brains(py, f)).transpose()?;
     let done = interruptibly(py, move |stop| {
@@ -364,7 +373,7 @@ fn exercise<'py>(
     settings: &Bound<'py, PyDict>,
     prediction_json: Option<String>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let _one = one_at_a_time(py)?;
+    let _one = one_at_a_time(py, "ratelab.exercise")?;
     let prediction: Option<toml::Table> = prediction_json
         .map(|json| serde_json::from_str(&json))
         .transpose()
@@ -431,7 +440,7 @@ fn run<'py>(
     policy: Option<Py<PyAny>>,
     nodes: Vec<(String, Py<PyAny>)>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let _one = one_at_a_time(py)?;
+    let _one = one_at_a_time(py, "ratelab.run")?;
     let spec = run_spec::from_settings(settings)?;
     let classes: Vec<String> = nodes.iter().map(|(n, _)| n.clone()).collect();
     let _given = ratelab::python::node::give_classes(nodes);

@@ -504,6 +504,16 @@ fn lock_running() -> std::sync::MutexGuard<'static, HashMap<u64, Running>> {
     running().lock().unwrap_or_else(|e| e.into_inner())
 }
 
+/// Who the calling thread is running, as the warnings say it (`node 'policy' (p.py)`, `the
+/// brain b.py:act()`), if it is inside a call into learners' code of a run ([`CallbackGuard`]),
+/// `None` otherwise. The Python package refuses a `ratelab.run` from there: the outer run
+/// holds the process's one run (its text log and node classes) until its callbacks return.
+pub fn callback_of_this_thread() -> Option<String> {
+    // SAFETY: PyThread_get_thread_ident only reads the calling thread's id.
+    let thread = unsafe { pyo3::ffi::PyThread_get_thread_ident() } as u64;
+    lock_running().get(&thread).map(|r| r.what.clone())
+}
+
 /// Registers a call into learners' code for the watchdog and for [`interrupt_callbacks`];
 /// unregisters it when dropped. Create it while attached to the interpreter.
 pub struct CallbackGuard {

@@ -464,6 +464,29 @@ def test_first_runs_from_two_threads_at_once_both_finish():
     assert said.split() == ["2", "True", "True", "True"], said
 
 
+def test_a_run_from_inside_a_brain_is_refused_not_waited_for():
+    # The outer run holds the process's one run until its brain returns: a nested call
+    # waited on it for good. It is refused at once, naming the brain that made it.
+    said = in_a_fresh_interpreter("\n".join([
+        "import faulthandler, ratelab",
+        "faulthandler.dump_traceback_later(60, exit=True)",
+        "refused = []",
+        "def act(obs):",
+        "    if not refused:",
+        "        try:",
+        "            ratelab.run(clock='virtual', duration_s=0.1)",
+        "        except RuntimeError as e:",
+        "            refused.append(str(e))",
+        "    return 0.0",
+        "outer = ratelab.run(clock='virtual', duration_s=0.3, policy=act)",
+        "print(repr(outer).split()[1]); print(refused[0])",
+    ]))
+    verdict, refusal = said.splitlines()
+    assert verdict == "balanced", said
+    assert refusal.startswith("ratelab.run() was called from inside a run (the brain"), said
+    assert "call it after ratelab.run() returns" in refusal, said
+
+
 def test_import_ratelab_does_not_import_numpy():
     # #76: `import ratelab` costs the package, not NumPy (the command imports it too).
     said = in_a_fresh_interpreter(
