@@ -398,7 +398,7 @@ pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
     let domain = domain(args)?;
     let wait = args.wait;
     let env = ratelab::ros2::session::SessionEnv::from_process();
-    let session = inspect::open(args.connect.as_deref(), &env)?;
+    let session = inspect::open(args.connect.as_deref(), &env, &stop)?;
     let g = inspect::seen(&session, domain, wait)?;
     let mut out = std::io::stdout().lock();
     match &args.what {

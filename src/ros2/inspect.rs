@@ -27,7 +27,7 @@ use super::rmw_zenoh::qos::{
 };
 use super::{zerr, Ros2Error};
 use std::collections::BTreeSet;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 /// The Zenoh session a reader holds.
 pub use zenoh::Session;
 use zenoh::Wait;
@@ -521,18 +521,29 @@ pub fn topic_info(g: &Seen, topic: &str, verbose: bool) -> Result<String, String
 
 /// Open a Zenoh session for reading a domain: a client of the router at `connect`
 /// (`tcp/localhost:7447` by default, where rmw_zenoh's nodes find theirs), `ZENOH_CONFIG_OVERRIDE`
-/// applied as rmw_zenoh applies it ([`super::session::parse_override`]).
+/// applied as rmw_zenoh applies it ([`super::session::parse_override`]), and the router
+/// looked for as `ZENOH_ROUTER_CHECK_ATTEMPTS` says ([`super::session::router_check`], read
+/// as the nodes' session reads it): N attempts one second apart (unset: one), `0` until one
+/// answers or `stop` (Ctrl-C), saying on stderr that it waits. A negative value, which lets
+/// rmw_zenoh's nodes go on without a router, gives a reader one attempt: a reader is the
+/// router's client and has nothing to read without one.
 ///
 /// # Errors
-/// [`Ros2Error::Usage`] for a bad override; [`Ros2Error::Zenoh`] when no router answers
-/// (named, with how to start one).
+/// [`Ros2Error::Usage`] for a bad override, a bad `ZENOH_ROUTER_CHECK_ATTEMPTS`, an endpoint
+/// whose port is not one ([`check_router_endpoint`]) or a wait stopped; [`Ros2Error::Zenoh`]
+/// when no router answers (named, with how to start one).
 pub fn open(
     connect: Option<&str>,
     env: &super::session::SessionEnv,
+    stop: &ratelab_runtime::scheduler::StopFlag,
 ) -> Result<zenoh::Session, Ros2Error> {
+    use super::session::RouterCheck;
     let endpoint = connect
         .unwrap_or(super::session::DEFAULT_ROUTER)
         .to_string();
+    check_router_endpoint(&endpoint)?;
+    let check = super::session::router_check(env.router_check_attempts.as_deref())
+        .map_err(Ros2Error::Usage)?;
     let mut config = zenoh::Config::default();
     let set = |c: &mut zenoh::Config, k: &str, v: &str| {
         c.insert_json5(k, v).map_err(|e| {
@@ -552,21 +563,87 @@ pub fn open(
             }
         }
     }
-    zenoh::open(config).wait().map_err(|e| {
-        Ros2Error::Zenoh(format!(
-            "no Zenoh router answered at {} ({}): start one (`ros2 run rmw_zenoh_cpp rmw_zenohd`, `zenohd`, or a `ratelab run --ros2`, which runs one), or name it with --connect",
-            printable(&endpoint),
-            // Zenoh's message names its own source file after " at ": left out.
-            e.to_string()
-                .lines()
-                .next()
-                .unwrap_or_default()
-                .split(" at /")
-                .next()
-                .unwrap_or_default()
-                .trim_end_matches(['!', ' '])
-        ))
-    })
+    let attempts = match check {
+        RouterCheck::Attempts(n) => n.max(1),
+        RouterCheck::Skip => 1,
+        RouterCheck::Forever => u32::MAX,
+    };
+    let mut attempt = 0;
+    loop {
+        let began = Instant::now();
+        let failed = match zenoh::open(config.clone()).wait() {
+            Ok(session) => return Ok(session),
+            Err(e) => e,
+        };
+        attempt += 1;
+        if attempt >= attempts {
+            return Err(no_router(&endpoint, &failed.to_string()));
+        }
+        if attempt == 1 && check == RouterCheck::Forever {
+            eprintln!(
+                "[ratelab] waiting for a Zenoh router at {} (ZENOH_ROUTER_CHECK_ATTEMPTS=0) ...",
+                printable(&endpoint)
+            );
+        }
+        while began.elapsed() < Duration::from_secs(1) {
+            if stop.is_stopped() {
+                return Err(Ros2Error::Usage(format!(
+                    "stopped while waiting for a Zenoh router at {}",
+                    printable(&endpoint)
+                )));
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+/// The refusal when no router answered at `endpoint`, Zenoh's reason `why` in its first
+/// line (Zenoh's message names its own source file after " at ": left out).
+fn no_router(endpoint: &str, why: &str) -> Ros2Error {
+    Ros2Error::Zenoh(format!(
+        "no Zenoh router answered at {} ({}): start one (`ros2 run rmw_zenoh_cpp rmw_zenohd`, `zenohd`, or a `ratelab run --ros2`, which runs one), or name it with --connect",
+        printable(endpoint),
+        why.lines()
+            .next()
+            .unwrap_or_default()
+            .split(" at /")
+            .next()
+            .unwrap_or_default()
+            .trim_end_matches(['!', ' '])
+    ))
+}
+
+/// Check a router's endpoint before any session opens: for the protocols over IP (`tcp`,
+/// `udp`, `tls`, `quic`, `ws`), `PROTO/HOST:PORT` with PORT in 1..=65535 (after it, Zenoh's
+/// `?metadata` and `#config` may follow). Other protocols (`unixsock-stream/PATH`, …) are
+/// left to Zenoh, which names what it refuses.
+///
+/// # Errors
+/// [`Ros2Error::Usage`]: `--connect ENDPOINT: why`.
+pub fn check_router_endpoint(endpoint: &str) -> Result<(), Ros2Error> {
+    let bad = |why: &str| Ros2Error::Usage(format!("--connect {}: {why}", printable(endpoint)));
+    let Some((proto, rest)) = endpoint.split_once('/') else {
+        return Ok(());
+    };
+    if !["tcp", "udp", "tls", "quic", "ws"].contains(&proto) {
+        return Ok(());
+    }
+    let address = rest.split(['?', '#']).next().unwrap_or_default();
+    let Some((host, port)) = address.rsplit_once(':') else {
+        return Err(bad(&format!("expected {proto}/HOST:PORT")));
+    };
+    if host
+        .trim_start_matches('[')
+        .trim_end_matches(']')
+        .is_empty()
+    {
+        return Err(bad(&format!("no host: expected {proto}/HOST:PORT")));
+    }
+    match port.parse::<u16>() {
+        Ok(0) => Err(bad("port 0 means any port: connect to the router's")),
+        Ok(_) => Ok(()),
+        Err(_) => Err(bad("the port must be a number in 1..=65535")),
+    }
 }
 
 /// The graph of `domain` as its liveliness tokens say now: a liveliness query answered by
@@ -709,6 +786,35 @@ mod tests {
             ns.into(),
             String::new(),
         )
+    }
+
+    #[test]
+    fn a_router_endpoint_over_ip_needs_a_host_and_a_port() {
+        for ok in [
+            "tcp/localhost:7447",
+            "tls/[::1]:7447",
+            "udp/10.0.0.1:7447#iface=eth0",
+            "tcp/h:1?prio=1",
+            "unixsock-stream/tmp/z.sock",
+            "garbage",
+        ] {
+            assert!(check_router_endpoint(ok).is_ok(), "{ok}");
+        }
+        for (bad, why) in [
+            ("tcp/h:99999", "1..=65535"),
+            ("tcp/h:x", "1..=65535"),
+            ("tcp/h:0", "port 0"),
+            ("quic/h", "expected quic/HOST:PORT"),
+            ("ws/:80", "no host"),
+        ] {
+            let Err(Ros2Error::Usage(said)) = check_router_endpoint(bad) else {
+                panic!("{bad} taken")
+            };
+            assert!(
+                said.starts_with(&format!("--connect {bad}: ")) && said.contains(why),
+                "{said}"
+            );
+        }
     }
 
     fn endpoint(n: &NodeEntity, kind: EndpointKind, topic: &str, dds: &str) -> EndpointEntity {

@@ -17,7 +17,12 @@ pub(crate) struct Offering {
 
 impl Offering {
     pub(crate) fn start(args: &[&str]) -> Offering {
-        let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+        Offering::start_at(&format!("tcp/127.0.0.1:{}", free_port()), args)
+    }
+
+    /// As [`Offering::start`], its router at `endpoint`.
+    pub(crate) fn start_at(endpoint: &str, args: &[&str]) -> Offering {
+        let endpoint = endpoint.to_string();
         let mut child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
             .arg("run")
             .args(args)
@@ -390,6 +395,97 @@ fn no_router_or_a_bad_domain_is_said_in_one_line() {
         );
         assert!(!err.contains(".rs:") && !err.contains("Json5Err"), "{err}");
     }
+}
+
+/// The readers look for the router as rmw_zenoh's nodes do, `ZENOH_ROUTER_CHECK_ATTEMPTS`
+/// one second apart (it was ignored: one attempt whatever it said); `0` waits, saying so,
+/// until a router answers. An endpoint whose port is no port is refused before any session.
+#[test]
+fn the_readers_look_for_the_router_as_zenoh_router_check_attempts_says() {
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let attempts = |n: &str| [("ZENOH_ROUTER_CHECK_ATTEMPTS", n.to_string())];
+    let began = std::time::Instant::now();
+    let (code, _, err) = ratelab(
+        &["ros2", "--connect", &endpoint, "node", "list"],
+        &attempts("3"),
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("no Zenoh router answered"), "{err}");
+    // Three attempts, a second apart: two seconds of waiting at least.
+    assert!(
+        began.elapsed() >= std::time::Duration::from_secs(2),
+        "{:?}",
+        began.elapsed()
+    );
+    let (code, _, err) = ratelab(
+        &["ros2", "--connect", &endpoint, "node", "list"],
+        &attempts("x"),
+    );
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("ZENOH_ROUTER_CHECK_ATTEMPTS='x' is not an integer"),
+        "{err}"
+    );
+    for (bad, why) in [
+        (
+            "tcp/127.0.0.1:99999",
+            "the port must be a number in 1..=65535",
+        ),
+        ("tcp/127.0.0.1:0", "port 0 means any port"),
+        ("tcp/127.0.0.1", "expected tcp/HOST:PORT"),
+        ("tls/:7447", "no host"),
+    ] {
+        let (code, _, err) = ratelab(&["ros2", "--connect", bad, "node", "list"], &[]);
+        assert_eq!(code, 2, "{bad}: {err}");
+        assert!(
+            err.contains(&format!("--connect {bad}: {why}")),
+            "{bad}: {err}"
+        );
+        assert!(!err.contains("no Zenoh router answered"), "{err}");
+    }
+    // 0: waits for the router, and reads the graph through it once it runs.
+    let mut reader = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args([
+            "ros2",
+            "--connect",
+            &endpoint,
+            "--domain",
+            "5",
+            "--wait",
+            "2",
+        ])
+        .args(["node", "list"])
+        .env("ZENOH_ROUTER_CHECK_ATTEMPTS", "0")
+        .env_remove("ZENOH_CONFIG_OVERRIDE")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(2500));
+    let _run = Offering::start_at(
+        &endpoint,
+        &["--clock", "real", "--duration", "20", "--ros2", "5"],
+    );
+    let status = crate::distributed::exit_within(&mut reader, 60);
+    let read = |p: &mut dyn std::io::Read| {
+        let mut s = String::new();
+        p.read_to_string(&mut s).unwrap();
+        s
+    };
+    let out = read(reader.stdout.as_mut().unwrap());
+    let err = read(reader.stderr.as_mut().unwrap());
+    assert!(status.success(), "{err}");
+    assert!(
+        err.contains(&format!("waiting for a Zenoh router at {endpoint}")),
+        "{err}"
+    );
+    // It read the graph as the router held it when it answered: the run's router listens
+    // before the run's nodes are offered, so some or all may not be there yet.
+    assert!(
+        out.lines()
+            .all(|n| ["/actuator", "/policy", "/ratelab", "/sensor"].contains(&n)),
+        "{out}"
+    );
 }
 
 /// Every type `echo` decodes has the RIHS01 hash rosbags computes from ROS 2's own
