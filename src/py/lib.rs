@@ -113,10 +113,10 @@ fn to_py(e: &anyhow::Error) -> PyErr {
             return match r.cause {
                 RecordingError::Exists(_) => PyFileExistsError::new_err(text),
                 RecordingError::IsDirectory(_) => PyIsADirectoryError::new_err(text),
-                // A disk that filled, rerun failing to write: the system's, not a setting.
-                RecordingError::Unwritable { .. } | RecordingError::Rerun { .. } => {
-                    PyOSError::new_err(text)
-                }
+                // A folder that is not there or not the user's: Python's own subclass; a disk
+                // that filled, rerun failing to write: the system's, not a setting.
+                RecordingError::Unwritable { kind, .. } => os_error(kind, text),
+                RecordingError::Rerun { .. } => PyOSError::new_err(text),
                 _ => PyValueError::new_err(text),
             };
         }

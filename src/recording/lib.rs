@@ -356,6 +356,8 @@ pub enum RecordingError {
         path: PathBuf,
         /// The OS's reason.
         detail: String,
+        /// Its kind (a front end says it in its own terms: Python's `PermissionError`).
+        kind: std::io::ErrorKind,
     },
     /// The graph cannot be drawn as a watcher sees it ([`watched::record`]): its topics
     /// cannot be made (a validated configuration has none that cannot).
@@ -391,6 +393,9 @@ impl RecordingError {
                 p.display(),
                 speech.force()
             ),
+            RecordingError::Unwritable { path, detail, .. } => {
+                format!("{record}: cannot write {}: {detail}", path.display())
+            }
             other => other.to_string(),
         }
     }
@@ -405,7 +410,9 @@ impl From<ratelab_core::output::OutputError> for RecordingError {
                 path,
                 kind: "a folder",
             } => RecordingError::IsDirectory(path),
-            OutputError::Io { path, detail, .. } => RecordingError::Unwritable { path, detail },
+            OutputError::Io { path, detail, kind } => {
+                RecordingError::Unwritable { path, detail, kind }
+            }
             other => RecordingError::Output(other),
         }
     }
@@ -646,6 +653,10 @@ impl Recording {
             let file =
                 rerun::sink::FileSink::new(&tmp).map_err(|e| RecordingError::Unwritable {
                     path: path.to_path_buf(),
+                    kind: match &e {
+                        rerun::sink::FileSinkError::CreateFile { source, .. } => source.kind(),
+                        _ => std::io::ErrorKind::Other,
+                    },
                     detail: e.to_string(),
                 })?;
             // The live sink never holds up the file, even when the viewer cannot start.
@@ -1462,7 +1473,10 @@ mod tests {
         ));
         assert!(matches!(
             check_output_path(Path::new("/proc/ratelab/x.rrd"), false),
-            Err(RecordingError::Unwritable { .. })
+            Err(RecordingError::Unwritable {
+                kind: std::io::ErrorKind::NotFound,
+                ..
+            })
         ));
     }
 }

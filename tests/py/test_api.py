@@ -246,6 +246,19 @@ def test_a_recording_or_out_folder_refused_names_the_keyword_and_raises_its_kind
     with pytest.raises(IsADirectoryError) as e:
         ratelab.run(duration_s=0.2, policy=tmp_path, **VIRTUAL)
     assert str(tmp_path) in str(e.value), str(e.value)
+    # A recording that cannot be made says its kind too (it was a plain OSError).
+    with pytest.raises(FileNotFoundError) as e:
+        ratelab.run(duration_s=0.2, record="/proc/ratelab/x.rrd", **VIRTUAL)
+    assert str(e.value).startswith("record: cannot write /proc/ratelab/x.rrd"), str(e.value)
+    with pytest.raises(NotADirectoryError) as e:
+        ratelab.run(duration_s=0.2, record=blocker / "x.rrd", **VIRTUAL)
+    assert str(e.value).startswith("record: ") and "--record" not in str(e.value), str(e.value)
+    # An empty path names nothing: the setting's mistake (it was FileNotFoundError).
+    for keyword in ("policy", "record", "out", "graph"):
+        with pytest.raises(ratelab.SettingError) as e:
+            ratelab.run(duration_s=0.2, **{keyword: ""}, **VIRTUAL)
+        assert isinstance(e.value, ValueError), keyword
+        assert str(e.value) == f"{keyword} is an empty path: it names no file or folder"
 
 
 def test_a_brain_that_raises_fails_its_node_and_keeps_the_figures():

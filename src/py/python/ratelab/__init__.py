@@ -208,12 +208,17 @@ def _text(name: str, value: Any, what: str) -> str:
 
 
 def _path(name: str, value: Any) -> str:
+    """`value` as a path (a str or os.PathLike): TypeError for any other type, ValueError for
+    an empty one (it names no file: a setting's mistake, not the file system's)."""
     try:
-        return os.fspath(value)
+        path = os.fspath(value)
     except TypeError:
         raise SettingTypeError(
             f"{name} must be a path (a str or os.PathLike), got {value!r}"
         ) from None
+    if not path:
+        raise SettingError(f"{name} is an empty path: it names no file or folder")
+    return path
 
 
 def _is_list(value: Any) -> bool:
