@@ -1240,18 +1240,27 @@ mod tests {
             said,
             "record: r.rrd: is a symbolic link; refusing to write through it"
         );
-        // A full disk: the file named, in any front end's words.
+        // A full disk: the file named, in each front end's words, its kind kept.
         let full = RecordingError::from(OutputError::Io {
             path: p(),
             detail: "No space left on device".into(),
             kind: std::io::ErrorKind::StorageFull,
         });
-        for speech in [Speech::Flags, Speech::Keywords] {
-            assert_eq!(
-                full.said(speech),
-                "cannot write recording r.rrd: No space left on device"
-            );
-        }
+        assert_eq!(
+            full.said(Speech::Flags),
+            "cannot write recording r.rrd: No space left on device"
+        );
+        assert_eq!(
+            full.said(Speech::Keywords),
+            "record: cannot write r.rrd: No space left on device"
+        );
+        assert!(matches!(
+            full,
+            RecordingError::Unwritable {
+                kind: std::io::ErrorKind::StorageFull,
+                ..
+            }
+        ));
         let rerun = RecordingError::Rerun {
             path: p(),
             detail: "closed".into(),
