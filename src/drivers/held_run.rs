@@ -76,8 +76,9 @@ fn held_rows(cfg: &RunConfig, every: u64) -> u64 {
 /// memory, would pass [`MAX_HELD_TRACE_VALUES`] values.
 ///
 /// # Errors
-/// [`TraceTooLarge`], naming the `--trace-every` that fits.
-pub fn check_held_trace(cfg: &RunConfig, every: u64) -> Result<(), TraceTooLarge> {
+/// [`TraceTooLarge`], naming the keep-one-in that fits in `speech`'s words (`trace_every=2`
+/// in Python, `--trace-every 2` on the command line).
+pub fn check_held_trace(cfg: &RunConfig, every: u64, speech: Speech) -> Result<(), TraceTooLarge> {
     let columns = crate::trace_csv::column_count(&cfg.graph).max(1) as u64;
     let rows = held_rows(cfg, every);
     let values = rows.saturating_mul(columns);
@@ -92,8 +93,9 @@ pub fn check_held_trace(cfg: &RunConfig, every: u64) -> Result<(), TraceTooLarge
         cfg.duration.as_secs_f64()
     );
     let line = format!(
-        "{}; keep one step in {fits} or more (trace_every={fits}, --trace-every {fits}), or write trace.csv as the run goes with `ratelab run --out DIR`",
-        ratelab_core::limits::refusal(what, "MAX_HELD_TRACE_VALUES")
+        "{}; keep one step in {fits} or more ({}), or write trace.csv as the run goes with `ratelab run --out DIR`",
+        ratelab_core::limits::refusal(what, "MAX_HELD_TRACE_VALUES"),
+        speech.value(ratelab_runtime::setting::Setting::TraceEvery, &fits)
     );
     Err(TraceTooLarge {
         values,
@@ -128,7 +130,7 @@ pub fn run(
         check_classes(&cfg.graph, &classes, speech)?;
         // The trace is returned in memory: one that would not fit is refused now, not when
         // the process runs out of memory.
-        check_held_trace(cfg, every)?;
+        check_held_trace(cfg, every, speech)?;
         Ok(())
     });
     let opts = StartOptions {
@@ -222,20 +224,26 @@ mod tests {
         // Steps at 0, 20 ms, …, 10 s (501), and the last counted again: an upper bound.
         assert_eq!(held_rows(&chapter(10), 1), 502);
         assert_eq!(held_rows(&chapter(10), 10), 52);
-        check_held_trace(&chapter(86_400), 1).unwrap();
-        let e = check_held_trace(&chapter(2 * 86_400), 1).unwrap_err();
+        let check = |secs, every| check_held_trace(&chapter(secs), every, Speech::Keywords);
+        check(86_400, 1).unwrap();
+        let e = check(2 * 86_400, 1).unwrap_err();
         assert_eq!(e.every, 2, "{e}");
         let line = e.to_string();
         assert!(
-            line.contains("(ratelab::limits::MAX_HELD_TRACE_VALUES); keep one step in 2 or more (trace_every=2, --trace-every 2)"),
+            line.contains("(ratelab::limits::MAX_HELD_TRACE_VALUES); keep one step in 2 or more (trace_every=2), or write"),
             "{line}"
         );
-        assert!(!line.contains('\n'), "{line}");
-        check_held_trace(&chapter(2 * 86_400), e.every).unwrap();
+        assert!(
+            !line.contains('\n') && !line.contains("--trace-every"),
+            "{line}"
+        );
+        let flags = check_held_trace(&chapter(2 * 86_400), 1, Speech::Flags).unwrap_err();
+        assert!(flags.to_string().contains("(--trace-every 2)"), "{flags}");
+        check(2 * 86_400, e.every).unwrap();
         // Ten years (the longest run): refused at once, naming the least that fits.
-        let e = check_held_trace(&chapter(315_360_000), 1).unwrap_err();
+        let e = check(315_360_000, 1).unwrap_err();
         assert_eq!(e.every, 2820, "{e}");
-        check_held_trace(&chapter(315_360_000), e.every).unwrap();
-        assert!(check_held_trace(&chapter(315_360_000), e.every - 1).is_err());
+        check(315_360_000, e.every).unwrap();
+        assert!(check(315_360_000, e.every - 1).is_err());
     }
 }

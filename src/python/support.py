@@ -200,7 +200,10 @@ def describe(exc, script, tb=None):
         return f"{script}:{exc.lineno}: {name}: {_one_line(exc.msg)}"
     frames = traceback.extract_tb(tb if tb is not None else exc.__traceback__)
     mine = _mine(frames, script)
-    frame = (mine or frames or [None])[-1]
+    # Code typed at a prompt or given to `python -c` (`<stdin>`, `<string>`) is not in a
+    # file beside `script`: its innermost frame, never this module's, is still the learner's.
+    theirs = [f for f in frames if f.filename != "<ratelab>"]
+    frame = (mine or theirs or frames or [None])[-1]
     where = _where(frame.filename, frame.lineno) if frame is not None else script
     message = _one_line(exc)
     return f"{where}: {name}: {message}" if message else f"{where}: {name}"
@@ -345,7 +348,16 @@ def _as_kind(kind, value, name):
         except (TypeError, ValueError, BufferError) as e:
             raise TypeError(f"field '{name}' takes bytes (or a contiguous array), got "
                             f"{type(value).__name__}: {e}") from None
-    return float(0.0 if value is None else value)
+    if value is None:
+        return 0.0
+    # A number of any kind (int, float, NumPy's scalars, a 0-d array), never a text that
+    # reads as one: float("1.5") would take it, and float("x") fail inside ratelab.
+    if not isinstance(value, (str, bytes, bytearray)):
+        try:
+            return float(value)
+        except (TypeError, ValueError):
+            pass
+    raise TypeError(f"field '{name}' takes a number, got {type(value).__name__} {value!r:.40}")
 
 
 class _Msg:
@@ -663,7 +675,15 @@ class NodeHandle:
 
     def create_timer(self, timer_period_sec, callback, **_kw):
         period_ns = self._rt.period_ns
-        ticks = float(timer_period_sec) * 1e9 / period_ns
+        try:
+            if isinstance(timer_period_sec, (str, bytes, bytearray, bool)):
+                raise TypeError
+            seconds = float(timer_period_sec)
+        except (TypeError, ValueError):
+            raise ContractError(self._rt.where(), f"create_timer's period must be a number "
+                                f"of seconds, got {type(timer_period_sec).__name__} "
+                                f"{timer_period_sec!r:.40}") from None
+        ticks = seconds * 1e9 / period_ns
         every = round(ticks)
         if every < 1 or abs(ticks - every) > 1e-6 * max(1.0, ticks):
             raise ContractError(self._rt.where(), f"create_timer({timer_period_sec}): node "
@@ -770,10 +790,17 @@ class NodeRuntime:
         """`script:line` of the innermost frame in the learner's script (the call that
         broke the contract), else the script."""
         frame = sys._getframe(1)
+        theirs = None  # the innermost frame that is not ratelab's own
         while frame is not None:
-            if frame.f_code.co_filename == self.script:
+            filename = frame.f_code.co_filename
+            if filename == self.script:
                 return f"{self.script}:{frame.f_lineno}"
+            if theirs is None and filename != "<ratelab>":
+                theirs = frame
             frame = frame.f_back
+        # A class given from a prompt or `python -c` has no file: its own line still is.
+        if theirs is not None and self.script.startswith("<"):
+            return _where(theirs.f_code.co_filename, theirs.f_lineno)
         return self.script
 
     def _find_class(self, module, class_name):

@@ -181,7 +181,7 @@ def test_a_trace_too_large_to_hold_is_refused_before_the_run():
     assert isinstance(e.value, MemoryError) and isinstance(e.value, ratelab.Error)
     line = str(e.value)
     assert "\n" not in line and "MAX_HELD_TRACE_VALUES" in line, line
-    assert "trace_every=2820" in line, line
+    assert "(trace_every=2820)" in line and "--trace-every" not in line, line
     # Thinned as asked: steps 1, 11, ..., 101; the metrics count every step.
     run = ratelab.run(duration_s=2.0, trace_every=10, **VIRTUAL)
     assert [int(s) for s in run.trace["step"]] == list(range(1, 102, 10))
@@ -843,6 +843,41 @@ def test_a_node_class_defined_in_a_cell_runs_here():
                       **VIRTUAL)
     assert not run.metrics["balanced"]  # no force: the pole falls
     assert any("holding" in line and "policy" in line for line in run.log), run.log
+
+
+def test_a_node_class_s_misuse_typed_at_a_prompt_points_at_its_own_line():
+    # Code given to `python -c` (or typed at a prompt) is no file beside the graph: its
+    # failures pointed into ratelab's own module (`<ratelab>:NNN`). A text where a number
+    # goes is a TypeError naming the field (float("x") failed inside ratelab; "1.5" passed).
+    said = in_a_fresh_interpreter("\n".join([
+        "import ratelab",
+        "from ratelab import Force, State",
+        "class Bad:",
+        "    def __init__(self, node):",
+        "        self.pub = node.create_publisher(Force, '/action', 1)",
+        "        node.create_subscription(State, '/obs', lambda m: None, 1)",
+        "        node.create_timer(node.get_period(), self.tick)",
+        "    def tick(self):",
+        "        self.pub.publish(Force(newtons='1.5'))",
+        "try:",
+        "    ratelab.run(graph='graphs/cartpole-python.toml', nodes={'policy': Bad},",
+        "                clock='virtual', duration_s=0.5)",
+        "except ratelab.NodeFailed as e:",
+        "    print(e)",
+        "class Timer:",
+        "    def __init__(self, node):",
+        "        node.create_timer('x', lambda: None)",
+        "try:",
+        "    ratelab.run(graph='graphs/cartpole-python.toml', nodes={'policy': Timer},",
+        "                clock='virtual', duration_s=0.5)",
+        "except ratelab.Error as e:",
+        "    print(e)",
+    ]))
+    field, timer = said.strip().splitlines()
+    assert "<string>:9: TypeError: field 'newtons' takes a number, got str '1.5'" in field, said
+    assert "<ratelab>" not in said, said
+    assert "<string>:17: create_timer's period must be a number of seconds, got str 'x'" \
+        in timer, said
 
 
 # ---- #71: the package in Python's terms ------------------------------------------------------
