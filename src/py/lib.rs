@@ -47,6 +47,13 @@ pyo3::create_exception!(
 
 pyo3::create_exception!(
     _native,
+    RunInProgress,
+    PyRuntimeError,
+    "A run, sweep, cliff search or exercise started from inside a run's brain or node: the run in progress holds the process's one run until that callback returns."
+);
+
+pyo3::create_exception!(
+    _native,
     TraceTooLarge,
     PyMemoryError,
     "A run whose trace, returned in memory, would hold more values than ratelab's bound (ratelab::limits::MAX_HELD_TRACE_VALUES): refused before it starts."
@@ -179,14 +186,20 @@ fn os_error(kind: std::io::ErrorKind, text: String) -> PyErr {
 /// classes), so two at once would mix their logs.
 ///
 /// # Errors
-/// KeyboardInterrupt while waiting; RuntimeError at once when called from inside a run's
-/// node or brain (`call`, e.g. `ratelab.run`, is what it says was called): the outer run
+/// KeyboardInterrupt while waiting; `RunInProgress` (a RuntimeError) at once when called
+/// from inside a run's node or brain (`call`, e.g. `ratelab.run`, is what it says was called): the outer run
 /// holds the lock until that callback returns, so waiting would never end.
 fn one_at_a_time(py: Python<'_>, call: &str) -> PyResult<std::sync::MutexGuard<'static, ()>> {
-    if let Some(what) = ratelab::python::callback_of_this_thread() {
-        return Err(PyRuntimeError::new_err(format!(
+    if let Some((what, loading)) = ratelab::python::callback_of_this_thread() {
+        // The likeliest way here: a node's or brain's script with a run at its top level,
+        // which runs again when ratelab loads the script.
+        let hint = match loading {
+            true => " (a script's top-level code runs again when ratelab loads it: put the run under `if __name__ == \"__main__\":`)",
+            false => "",
+        };
+        return Err(RunInProgress::new_err(format!(
             "{call}() was called from inside a run ({what}): a run cannot start another \
-             one in the same process; call it after ratelab.run() returns"
+             in the same process; start it after the run in progress returns{hint}"
         )));
     }
     static ONE: std::sync::Mutex<()> = std::sync::Mutex::new(());
@@ -570,5 +583,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("NoPrediction", m.py().get_type::<NoPrediction>())?;
     m.add("TraceTooLarge", m.py().get_type::<TraceTooLarge>())?;
+    m.add("RunInProgress", m.py().get_type::<RunInProgress>())?;
     Ok(())
 }

@@ -505,13 +505,16 @@ fn lock_running() -> std::sync::MutexGuard<'static, HashMap<u64, Running>> {
 }
 
 /// Who the calling thread is running, as the warnings say it (`node 'policy' (p.py)`, `the
-/// brain b.py:act()`), if it is inside a call into learners' code of a run ([`CallbackGuard`]),
-/// `None` otherwise. The Python package refuses a `ratelab.run` from there: the outer run
-/// holds the process's one run (its text log and node classes) until its callbacks return.
-pub fn callback_of_this_thread() -> Option<String> {
+/// brain b.py:act()`), and whether that call is a script's loading (its top level running),
+/// if it is inside a call into learners' code of a run ([`CallbackGuard`]); `None`
+/// otherwise. The Python package refuses a `ratelab.run` from there: the outer run holds
+/// the process's one run (its text log and node classes) until its callbacks return.
+pub fn callback_of_this_thread() -> Option<(String, bool)> {
     // SAFETY: PyThread_get_thread_ident only reads the calling thread's id.
     let thread = unsafe { pyo3::ffi::PyThread_get_thread_ident() } as u64;
-    lock_running().get(&thread).map(|r| r.what.clone())
+    lock_running()
+        .get(&thread)
+        .map(|r| (r.what.clone(), r.loading))
 }
 
 /// Registers a call into learners' code for the watchdog and for [`interrupt_callbacks`];

@@ -202,11 +202,23 @@ def describe(exc, script, tb=None):
     mine = _mine(frames, script)
     # Code typed at a prompt or given to `python -c` (`<stdin>`, `<string>`) is not in a
     # file beside `script`: its innermost frame, never this module's, is still the learner's.
-    theirs = [f for f in frames if f.filename != "<ratelab>"]
+    theirs = [f for f in frames if not _ratelab_s(f.filename)]
     frame = (mine or theirs or frames or [None])[-1]
     where = _where(frame.filename, frame.lineno) if frame is not None else script
     message = _one_line(exc)
     return f"{where}: {name}: {message}" if message else f"{where}: {name}"
+
+
+def _ratelab_s(filename):
+    """Whether `filename` is ratelab's own code: this module (`<ratelab>`) or the Python
+    package's files (its `ratelab.run` between a learner's line and a refusal)."""
+    if filename == "<ratelab>":
+        return True
+    package = getattr(sys.modules.get("ratelab"), "__file__", None)
+    if not package:
+        return False
+    folder = os.path.dirname(os.path.abspath(package))
+    return os.path.abspath(filename).startswith(folder + os.sep)
 
 
 def _mine(frames, script):
@@ -355,7 +367,7 @@ def _as_kind(kind, value, name):
     if not isinstance(value, (str, bytes, bytearray)):
         try:
             return float(value)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             pass
     raise TypeError(f"field '{name}' takes a number, got {type(value).__name__} {value!r:.40}")
 
@@ -679,7 +691,9 @@ class NodeHandle:
             if isinstance(timer_period_sec, (str, bytes, bytearray, bool)):
                 raise TypeError
             seconds = float(timer_period_sec)
-        except (TypeError, ValueError):
+            if not math.isfinite(seconds):
+                raise ValueError
+        except (TypeError, ValueError, OverflowError):
             raise ContractError(self._rt.where(), f"create_timer's period must be a number "
                                 f"of seconds, got {type(timer_period_sec).__name__} "
                                 f"{timer_period_sec!r:.40}") from None
@@ -795,7 +809,7 @@ class NodeRuntime:
             filename = frame.f_code.co_filename
             if filename == self.script:
                 return f"{self.script}:{frame.f_lineno}"
-            if theirs is None and filename != "<ratelab>":
+            if theirs is None and not _ratelab_s(filename):
                 theirs = frame
             frame = frame.f_back
         # A class given from a prompt or `python -c` has no file: its own line still is.

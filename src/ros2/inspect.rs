@@ -524,7 +524,9 @@ pub fn topic_info(g: &Seen, topic: &str, verbose: bool) -> Result<String, String
 /// applied as rmw_zenoh applies it ([`super::session::parse_override`]), and the router
 /// looked for as `ZENOH_ROUTER_CHECK_ATTEMPTS` says ([`super::session::router_check`], read
 /// as the nodes' session reads it): N attempts one second apart (unset: one), `0` until one
-/// answers or `stop` (Ctrl-C), saying on stderr that it waits. A negative value, which lets
+/// answers; after a first attempt fails it says on stderr that it waits, and `stop`
+/// (Ctrl-C) ends the wait. The endpoints it names are those it connects to
+/// (`ZENOH_CONFIG_OVERRIDE`'s `connect/endpoints` when set). A negative value, which lets
 /// rmw_zenoh's nodes go on without a router, gives a reader one attempt: a reader is the
 /// router's client and has nothing to read without one.
 ///
@@ -538,10 +540,10 @@ pub fn open(
     stop: &ratelab_runtime::scheduler::StopFlag,
 ) -> Result<zenoh::Session, Ros2Error> {
     use super::session::RouterCheck;
-    let endpoint = connect
+    use std::io::Write as _;
+    let given = connect
         .unwrap_or(super::session::DEFAULT_ROUTER)
         .to_string();
-    check_router_endpoint(&endpoint)?;
     let check = super::session::router_check(env.router_check_attempts.as_deref())
         .map_err(Ros2Error::Usage)?;
     let mut config = zenoh::Config::default();
@@ -553,7 +555,7 @@ pub fn open(
     };
     set(&mut config, "mode", "\"client\"")?;
     set(&mut config, "scouting/multicast/enabled", "false")?;
-    let quoted = serde_json::to_string(&endpoint).map_err(zerr)?;
+    let quoted = serde_json::to_string(&given).map_err(zerr)?;
     set(&mut config, "connect/endpoints", &format!("[{quoted}]"))?;
     if let Some(o) = env.config_override.as_deref() {
         for (k, v) in super::session::parse_override(o).map_err(Ros2Error::Usage)? {
@@ -563,10 +565,25 @@ pub fn open(
             }
         }
     }
+    // Where it looks, as the override may have said it (rmw_zenoh's usual way).
+    let endpoints: Vec<String> = config
+        .get_json("connect/endpoints")
+        .ok()
+        .and_then(|j| serde_json::from_str(&j).ok())
+        .unwrap_or_else(|| vec![given.clone()]);
+    for e in &endpoints {
+        check_router_endpoint(e)?;
+    }
+    let endpoint = printable(&endpoints.join(", "));
     let attempts = match check {
         RouterCheck::Attempts(n) => n.max(1),
         RouterCheck::Skip => 1,
         RouterCheck::Forever => u32::MAX,
+    };
+    let stopped = || {
+        Ros2Error::Usage(format!(
+            "stopped while waiting for a Zenoh router at {endpoint}"
+        ))
     };
     let mut attempt = 0;
     loop {
@@ -579,18 +596,22 @@ pub fn open(
         if attempt >= attempts {
             return Err(no_router(&endpoint, &failed.to_string()));
         }
-        if attempt == 1 && check == RouterCheck::Forever {
-            eprintln!(
-                "[ratelab] waiting for a Zenoh router at {} (ZENOH_ROUTER_CHECK_ATTEMPTS=0) ...",
-                printable(&endpoint)
+        if stop.is_stopped() {
+            return Err(stopped());
+        }
+        if attempt == 1 {
+            let how_long = match check {
+                RouterCheck::Forever => "0: until one answers".to_string(),
+                _ => format!("{attempts}: up to {attempts} attempts a second apart"),
+            };
+            let _ = writeln!(
+                std::io::stderr(),
+                "[ratelab] waiting for a Zenoh router at {endpoint} (ZENOH_ROUTER_CHECK_ATTEMPTS={how_long}) ..."
             );
         }
         while began.elapsed() < Duration::from_secs(1) {
             if stop.is_stopped() {
-                return Err(Ros2Error::Usage(format!(
-                    "stopped while waiting for a Zenoh router at {}",
-                    printable(&endpoint)
-                )));
+                return Err(stopped());
             }
             std::thread::sleep(Duration::from_millis(20));
         }
@@ -601,8 +622,7 @@ pub fn open(
 /// line (Zenoh's message names its own source file after " at ": left out).
 fn no_router(endpoint: &str, why: &str) -> Ros2Error {
     Ros2Error::Zenoh(format!(
-        "no Zenoh router answered at {} ({}): start one (`ros2 run rmw_zenoh_cpp rmw_zenohd`, `zenohd`, or a `ratelab run --ros2`, which runs one), or name it with --connect",
-        printable(endpoint),
+        "no Zenoh router answered at {endpoint} ({}): start one (`ros2 run rmw_zenoh_cpp rmw_zenohd`, `zenohd`, or a `ratelab run --ros2`, which runs one), or name it with --connect",
         why.lines()
             .next()
             .unwrap_or_default()
@@ -629,7 +649,7 @@ pub fn check_router_endpoint(endpoint: &str) -> Result<(), Ros2Error> {
         return Ok(());
     }
     let address = rest.split(['?', '#']).next().unwrap_or_default();
-    let Some((host, port)) = address.rsplit_once(':') else {
+    let Some((host, port)) = address.rsplit_once(':').filter(|_| !address.ends_with(']')) else {
         return Err(bad(&format!("expected {proto}/HOST:PORT")));
     };
     if host
@@ -806,6 +826,7 @@ mod tests {
             ("tcp/h:0", "port 0"),
             ("quic/h", "expected quic/HOST:PORT"),
             ("ws/:80", "no host"),
+            ("tcp/[::1]", "expected tcp/HOST:PORT"),
         ] {
             let Err(Ros2Error::Usage(said)) = check_router_endpoint(bad) else {
                 panic!("{bad} taken")

@@ -488,8 +488,9 @@ def test_a_run_from_inside_a_brain_is_refused_not_waited_for():
         "    if not refused:",
         "        try:",
         "            ratelab.run(clock='virtual', duration_s=0.1)",
-        "        except RuntimeError as e:",
-        "            refused.append(str(e))",
+        "        except ratelab.RunInProgress as e:",
+        "            refused.append(str(e) if isinstance(e, (RuntimeError, ratelab.Error))",
+        "                           else 'not a RuntimeError')",
         "    return 0.0",
         "outer = ratelab.run(clock='virtual', duration_s=0.3, policy=act)",
         "print(repr(outer).split()[1]); print(refused[0])",
@@ -497,7 +498,7 @@ def test_a_run_from_inside_a_brain_is_refused_not_waited_for():
     verdict, refusal = said.splitlines()
     assert verdict == "balanced", said
     assert refusal.startswith("ratelab.run() was called from inside a run (the brain"), said
-    assert "call it after ratelab.run() returns" in refusal, said
+    assert "start it after the run in progress returns" in refusal, said
 
 
 def test_import_ratelab_does_not_import_numpy():
@@ -872,8 +873,18 @@ def test_a_node_class_s_misuse_typed_at_a_prompt_points_at_its_own_line():
         "                clock='virtual', duration_s=0.5)",
         "except ratelab.Error as e:",
         "    print(e)",
+        "class NaN:",
+        "    def __init__(self, node):",
+        "        node.create_timer(float('nan'), print)",
+        "try:",
+        "    ratelab.run(graph='graphs/cartpole-python.toml', nodes={'policy': NaN},",
+        "                clock='virtual', duration_s=0.5)",
+        "except ratelab.Error as e:",
+        "    print(e)",
     ]))
-    field, timer = said.strip().splitlines()
+    field, timer, nan = said.strip().splitlines()
+    assert "<string>:25: create_timer's period must be a number of seconds, got float nan" \
+        in nan, said
     assert "<string>:9: TypeError: field 'newtons' takes a number, got str '1.5'" in field, said
     assert "<ratelab>" not in said, said
     assert "<string>:17: create_timer's period must be a number of seconds, got str 'x'" \

@@ -93,6 +93,7 @@ __all__ = [
     "SettingError",
     "SettingTypeError",
     "TraceTooLarge",
+    "RunInProgress",
     "run",
     "sweep",
     "cliff",
@@ -122,6 +123,13 @@ class SettingTypeError(Error, TypeError):
 class NoPrediction(Error, ValueError):
     """An exercise asked for before its prediction was written (`ratelab exercise` refuses it
     too): the message names the learner's file and the keys it asks for."""
+
+
+class RunInProgress(Error, RuntimeError):
+    """`run`, `sweep`, `cliff` or `exercise` called from inside a run's brain or node (or a
+    script's top level, which runs again when ratelab loads it): the run in progress holds
+    the process's one run until that callback returns, so the call is refused at once
+    rather than left to wait for ever."""
 
 
 class TraceTooLarge(Error, MemoryError):
@@ -447,6 +455,8 @@ def _native_call(fn: Callable, *args: Any) -> Any:
         raise TraceTooLarge(str(e)) from None
     except _native.NoPrediction as e:
         raise NoPrediction(str(e)) from None
+    except _native.RunInProgress as e:
+        raise RunInProgress(str(e)) from None
     except (ValueError, TypeError) as e:
         # The cause, when there is one, is the learner's own exception (a brain file whose
         # import failed), kept with its traceback; else none (the native frame says nothing).
@@ -900,7 +910,8 @@ def run(
     """Run a graph, as `ratelab run` does, and return its figures. A setting left out (None)
     is `ratelab run`'s default: the same defaults for every front end. Calls from several
     threads run one after another (a run's log and its Python output are the process's
-    while it goes); `sweep` and `cliff` spread their runs over the cores themselves.
+    while it goes); `sweep` and `cliff` spread their runs over the cores themselves. A run
+    started from inside a run's brain or node raises `RunInProgress` (a RuntimeError).
 
     >>> import ratelab
     >>> run = ratelab.run(clock="virtual", duration_s=1)
