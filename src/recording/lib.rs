@@ -418,6 +418,26 @@ impl From<ratelab_core::output::OutputError> for RecordingError {
     }
 }
 
+/// rerun's refusal to start a recording of `path`: a file it could not create is the file
+/// system's refusal, [`RecordingError::Unwritable`] with its kind kept (a front end says it
+/// in its own terms: Python's `PermissionError`); any other failure is rerun's.
+fn stream_error(path: &Path, e: rerun::RecordingStreamError) -> RecordingError {
+    match &e {
+        rerun::RecordingStreamError::FileSink(rerun::sink::FileSinkError::CreateFile {
+            source,
+            ..
+        }) => RecordingError::Unwritable {
+            path: path.to_path_buf(),
+            kind: source.kind(),
+            detail: source.to_string(),
+        },
+        _ => RecordingError::Rerun {
+            path: path.to_path_buf(),
+            detail: e.to_string(),
+        },
+    }
+}
+
 /// Format a rate for a file name: `50`, `7.5`.
 fn hz_label(hz: f64) -> String {
     let s = format!("{hz:.3}");
@@ -631,10 +651,7 @@ impl Recording {
                     ..rerun::log::ChunkBatcherConfig::DEFAULT
                 });
         }
-        let rec_err = |e: rerun::RecordingStreamError| RecordingError::Rerun {
-            path: path.to_path_buf(),
-            detail: e.to_string(),
-        };
+        let rec_err = |e: rerun::RecordingStreamError| stream_error(path, e);
         let mut notice = None;
         let live = opts.spawn && viewer_on_path();
         if opts.spawn && !live {
@@ -1261,6 +1278,28 @@ mod tests {
                 ..
             }
         ));
+        // rerun failing to create the file: the file system's refusal, its kind kept.
+        let denied = std::io::Error::from(std::io::ErrorKind::PermissionDenied);
+        let made = stream_error(
+            &p(),
+            rerun::RecordingStreamError::FileSink(rerun::sink::FileSinkError::CreateFile {
+                source: denied,
+                path: p(),
+            }),
+        );
+        assert!(
+            matches!(
+                made,
+                RecordingError::Unwritable {
+                    kind: std::io::ErrorKind::PermissionDenied,
+                    ..
+                }
+            ),
+            "{made:?}"
+        );
+        assert!(made
+            .said(Speech::Keywords)
+            .starts_with("record: cannot write r.rrd: "));
         let rerun = RecordingError::Rerun {
             path: p(),
             detail: "closed".into(),

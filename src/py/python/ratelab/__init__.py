@@ -950,6 +950,8 @@ def run(
         or a NumPy array).
     policy: the brain: "scripted" (default), a checkpoint path, "FILE.py[:FUNCTION]", or a
         callable `f(obs) -> action` (obs a NumPy float32[5]; action a float in [-1, 1]).
+        What a brain or node prints goes to the run's log (`run.log`, log.txt), not to
+        this terminal, as a node's output does in a launch.
     record: write a rerun recording to this path. out: also write metrics.json, trace.csv
         and log.txt to this folder (force: replace existing files).
     nodes: classes for the graph's Python nodes, by node name ({"policy": MyNode}): each
