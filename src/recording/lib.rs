@@ -667,15 +667,8 @@ impl Recording {
                     detail: e.to_string(),
                 }
             })?;
-            let file =
-                rerun::sink::FileSink::new(&tmp).map_err(|e| RecordingError::Unwritable {
-                    path: path.to_path_buf(),
-                    kind: match &e {
-                        rerun::sink::FileSinkError::CreateFile { source, .. } => source.kind(),
-                        _ => std::io::ErrorKind::Other,
-                    },
-                    detail: e.to_string(),
-                })?;
+            let file = rerun::sink::FileSink::new(&tmp)
+                .map_err(|e| rec_err(rerun::RecordingStreamError::FileSink(e)))?;
             // The live sink never holds up the file, even when the viewer cannot start.
             let sinks: Vec<Box<dyn rerun::sink::LogSink>> = vec![
                 Box::new(file),
@@ -1239,14 +1232,14 @@ mod tests {
         use ratelab_core::output::OutputError;
         use ratelab_runtime::setting::Speech;
         let p = || PathBuf::from("r.rrd");
-        let exists = RecordingError::Exists(p());
-        assert_eq!(
-            exists.said(Speech::Flags),
-            "--record file exists: r.rrd (pass --force to overwrite)"
-        );
-        assert_eq!(
-            exists.said(Speech::Keywords),
-            "record: r.rrd: file exists (pass force=True to overwrite)"
+        let speaks = |e: &RecordingError, flags: &str, keywords: &str| {
+            assert_eq!(e.said(Speech::Flags), flags);
+            assert_eq!(e.said(Speech::Keywords), keywords);
+        };
+        speaks(
+            &RecordingError::Exists(p()),
+            "--record file exists: r.rrd (pass --force to overwrite)",
+            "record: r.rrd: file exists (pass force=True to overwrite)",
         );
         // A symbolic link put at the final name while the run went, found as the recording
         // is moved into place when it ends: no flag in Python.
@@ -1263,13 +1256,10 @@ mod tests {
             detail: "No space left on device".into(),
             kind: std::io::ErrorKind::StorageFull,
         });
-        assert_eq!(
-            full.said(Speech::Flags),
-            "cannot write recording r.rrd: No space left on device"
-        );
-        assert_eq!(
-            full.said(Speech::Keywords),
-            "record: cannot write r.rrd: No space left on device"
+        speaks(
+            &full,
+            "cannot write recording r.rrd: No space left on device",
+            "record: cannot write r.rrd: No space left on device",
         );
         assert!(matches!(
             full,

@@ -566,11 +566,10 @@ pub fn open(
         }
     }
     // Where it looks, as the override may have said it (rmw_zenoh's usual way).
-    let endpoints: Vec<String> = config
-        .get_json("connect/endpoints")
-        .ok()
-        .and_then(|j| serde_json::from_str(&j).ok())
-        .unwrap_or_else(|| vec![given.clone()]);
+    let mut endpoints = super::session::connect_endpoints(&config);
+    if endpoints.is_empty() {
+        endpoints.push(given);
+    }
     for e in &endpoints {
         check_router_endpoint(e)?;
     }

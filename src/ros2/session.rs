@@ -183,6 +183,16 @@ fn open_with(config: zenoh::Config, what: &str) -> Result<zenoh::Session, Ros2Er
     })
 }
 
+/// The endpoints `config` connects to (`connect/endpoints`, as an override may have set
+/// them); empty when it names none or cannot be read.
+pub(crate) fn connect_endpoints(config: &zenoh::Config) -> Vec<String> {
+    config
+        .get_json("connect/endpoints")
+        .ok()
+        .and_then(|j| serde_json::from_str(&j).ok())
+        .unwrap_or_default()
+}
+
 fn has_router(session: &zenoh::Session) -> bool {
     session.info().routers_zid().wait().next().is_some()
 }
@@ -218,12 +228,7 @@ pub fn open(env: &SessionEnv, stop: &StopFlag) -> Result<Ros2Session, Ros2Error>
     for (k, v) in &overrides {
         set(&mut config, k, v)?;
     }
-    let endpoints: Vec<String> = config
-        .get_json("connect/endpoints")
-        .ok()
-        .and_then(|j| serde_json::from_str(&j).ok())
-        .unwrap_or_default();
-    let endpoint = endpoints
+    let endpoint = connect_endpoints(&config)
         .first()
         .cloned()
         .unwrap_or_else(|| DEFAULT_ROUTER.to_string());
