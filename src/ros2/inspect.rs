@@ -27,7 +27,7 @@ use super::rmw_zenoh::qos::{
 };
 use super::{zerr, Ros2Error};
 use std::collections::BTreeSet;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 /// The Zenoh session a reader holds.
 pub use zenoh::Session;
 use zenoh::Wait;
@@ -540,19 +540,13 @@ pub fn open(
     stop: &ratelab_runtime::scheduler::StopFlag,
 ) -> Result<zenoh::Session, Ros2Error> {
     use super::session::RouterCheck;
-    use std::io::Write as _;
     let given = connect
         .unwrap_or(super::session::DEFAULT_ROUTER)
         .to_string();
     let check = super::session::router_check(env.router_check_attempts.as_deref())
         .map_err(Ros2Error::Usage)?;
+    use super::session::set;
     let mut config = zenoh::Config::default();
-    let set = |c: &mut zenoh::Config, k: &str, v: &str| {
-        c.insert_json5(k, v).map_err(|e| {
-            let why = ratelab_core::text::library_message(&e.to_string());
-            Ros2Error::Usage(format!("Zenoh config {k}={v}: {why}"))
-        })
-    };
     set(&mut config, "mode", "\"client\"")?;
     set(&mut config, "scouting/multicast/enabled", "false")?;
     let quoted = serde_json::to_string(&given).map_err(zerr)?;
@@ -575,45 +569,16 @@ pub fn open(
     }
     let endpoint = printable(&endpoints.join(", "));
     let attempts = match check {
-        RouterCheck::Attempts(n) => n.max(1),
+        RouterCheck::Attempts(n) => n,
         RouterCheck::Skip => 1,
         RouterCheck::Forever => u32::MAX,
     };
-    let stopped = || {
-        Ros2Error::Usage(format!(
-            "stopped while waiting for a Zenoh router at {endpoint}"
-        ))
-    };
-    let mut attempt = 0;
-    loop {
-        let began = Instant::now();
-        let failed = match zenoh::open(config.clone()).wait() {
-            Ok(session) => return Ok(session),
-            Err(e) => e,
-        };
-        attempt += 1;
-        if attempt >= attempts {
-            return Err(no_router(&endpoint, &failed.to_string()));
-        }
-        if stop.is_stopped() {
-            return Err(stopped());
-        }
-        if attempt == 1 {
-            let how_long = match check {
-                RouterCheck::Forever => "0: until one answers".to_string(),
-                _ => format!("{attempts}: up to {attempts} attempts a second apart"),
-            };
-            let _ = writeln!(
-                std::io::stderr(),
-                "[ratelab] waiting for a Zenoh router at {endpoint} (ZENOH_ROUTER_CHECK_ATTEMPTS={how_long}) ..."
-            );
-        }
-        while began.elapsed() < Duration::from_secs(1) {
-            if stop.is_stopped() {
-                return Err(stopped());
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
+    // Each attempt is one session opened (a client opens only with its router there).
+    let probe = || zenoh::open(config.clone()).wait();
+    let every = Duration::from_secs(1);
+    match super::session::look_for_router(check, attempts, &endpoint, stop, every, probe)? {
+        Ok(session) => Ok(session),
+        Err(failed) => Err(no_router(&endpoint, &failed.to_string())),
     }
 }
 

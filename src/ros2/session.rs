@@ -169,7 +169,11 @@ impl Ros2Session {
     }
 }
 
-fn set(config: &mut zenoh::Config, key: &str, value: &str) -> Result<(), Ros2Error> {
+/// Set `key` of `config` to the JSON5 `value`.
+///
+/// # Errors
+/// [`Ros2Error::Usage`]: Zenoh refused it (named, with Zenoh's reason).
+pub(crate) fn set(config: &mut zenoh::Config, key: &str, value: &str) -> Result<(), Ros2Error> {
     config.insert_json5(key, value).map_err(|e| {
         let why = ratelab_core::text::library_message(&e.to_string());
         Ros2Error::Usage(format!("Zenoh config {key}={value}: {why}"))
@@ -195,6 +199,108 @@ pub(crate) fn connect_endpoints(config: &zenoh::Config) -> Vec<String> {
 
 fn has_router(session: &zenoh::Session) -> bool {
     session.info().routers_zid().wait().next().is_some()
+}
+
+/// How often the nodes' session asks whether a router has answered, within each of
+/// `ZENOH_ROUTER_CHECK_ATTEMPTS`' seconds.
+const PROBE_EVERY: Duration = Duration::from_millis(20);
+
+/// One of `ZENOH_ROUTER_CHECK_ATTEMPTS`' attempts.
+const ATTEMPT: Duration = Duration::from_secs(1);
+
+/// Look for a router as `ZENOH_ROUTER_CHECK_ATTEMPTS` says: `attempts` attempts of one
+/// second each (`check` is what it was read as, for the waiting line), `probe` tried at the
+/// start of each and every `every` within it (a `probe` slower than `every` is tried again
+/// as soon as it returns). After the first attempt fails, when more are allowed, one line on
+/// stderr says it waits and where (`endpoint`, printable). `stop` (Ctrl-C) is heard between
+/// tries, every 20 ms. The nodes' session ([`open`]) and `ratelab ros2`'s readers
+/// ([`super::inspect::open`]) both look so.
+///
+/// Returns `Ok(Ok(found))` for the first `probe` that finds it, `Ok(Err(last))` with the
+/// last failure when every attempt has failed.
+///
+/// # Errors
+/// [`Ros2Error::Usage`]: stopped while waiting.
+pub(crate) fn look_for_router<T, E>(
+    check: RouterCheck,
+    attempts: u32,
+    endpoint: &str,
+    stop: &StopFlag,
+    every: Duration,
+    probe: impl FnMut() -> Result<T, E>,
+) -> Result<Result<T, E>, Ros2Error> {
+    let waiting = || {
+        let how_long = match check {
+            RouterCheck::Forever => "0: until one answers".to_string(),
+            _ => format!("{attempts}: up to {attempts} attempts a second apart"),
+        };
+        eprintln!(
+            "[ratelab] waiting for a Zenoh router at {endpoint} (ZENOH_ROUTER_CHECK_ATTEMPTS={how_long}) ..."
+        );
+    };
+    look_in_windows(attempts, ATTEMPT, every, stop, waiting, probe).map_err(|Stopped| {
+        Ros2Error::Usage(format!(
+            "stopped while waiting for a Zenoh router at {endpoint}"
+        ))
+    })
+}
+
+/// A wait ended by its stop flag.
+#[derive(Debug, PartialEq, Eq)]
+struct Stopped;
+
+/// [`look_for_router`]'s loop, its attempt's length given (tests use milliseconds):
+/// `waiting` is called once, after the first attempt fails, when more are allowed; the last
+/// attempt ends at its last `probe`, without waiting out its window.
+fn look_in_windows<T, E>(
+    attempts: u32,
+    window: Duration,
+    every: Duration,
+    stop: &StopFlag,
+    waiting: impl FnOnce(),
+    mut probe: impl FnMut() -> Result<T, E>,
+) -> Result<Result<T, E>, Stopped> {
+    let mut waiting = Some(waiting);
+    let mut attempt = 0;
+    loop {
+        attempt += 1;
+        let window_end = Instant::now() + window;
+        let failed = loop {
+            let failed = match probe() {
+                Ok(found) => return Ok(Ok(found)),
+                Err(e) => e,
+            };
+            if stop.is_stopped() {
+                return Err(Stopped);
+            }
+            let next = Instant::now() + every;
+            if next >= window_end {
+                break failed;
+            }
+            sleep_until(next, stop)?;
+        };
+        if attempt >= attempts.max(1) {
+            return Ok(Err(failed));
+        }
+        if let Some(say) = waiting.take() {
+            say();
+        }
+        sleep_until(window_end, stop)?;
+    }
+}
+
+/// Sleep until `until`, hearing `stop` every 20 ms.
+fn sleep_until(until: Instant, stop: &StopFlag) -> Result<(), Stopped> {
+    loop {
+        if stop.is_stopped() {
+            return Err(Stopped);
+        }
+        let left = until.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Ok(());
+        }
+        std::thread::sleep(left.min(Duration::from_millis(20)));
+    }
 }
 
 /// Open the session (see the module's header). `stop` (Ctrl-C) ends a wait for a router.
@@ -238,25 +344,11 @@ pub fn open(env: &SessionEnv, stop: &StopFlag) -> Result<Ros2Session, Ros2Error>
         RouterCheck::Forever => u32::MAX,
         RouterCheck::Attempts(n) => n,
     };
-    for attempt in 0..attempts {
-        if attempt == 1 && check == RouterCheck::Forever {
-            eprintln!(
-                "[ratelab] waiting for a Zenoh router at {} (ZENOH_ROUTER_CHECK_ATTEMPTS=0) ...",
-                ratelab_core::text::printable(&endpoint.to_string())
-            );
-        }
-        let until = Instant::now() + Duration::from_secs(1);
-        while Instant::now() < until {
-            if stop.is_stopped() {
-                return Err(Ros2Error::Usage(format!(
-                    "stopped while waiting for a Zenoh router at {endpoint}"
-                )));
-            }
-            if has_router(&session) {
-                return Ok(Ros2Session::new(session, Router::Found(endpoint)));
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
+    let shown = ratelab_core::text::printable(&endpoint).into_owned();
+    let probe = || has_router(&session).then_some(()).ok_or(());
+    let looked = look_for_router(check, attempts, &shown, stop, PROBE_EVERY, probe)?;
+    if looked.is_ok() {
+        return Ok(Ros2Session::new(session, Router::Found(endpoint)));
     }
     // No router: be one, where ROS 2 nodes look for it.
     let _ = session.close().wait();
@@ -288,6 +380,69 @@ mod tests {
         assert!(router_check(Some("x"))
             .unwrap_err()
             .contains("not an integer"));
+    }
+
+    /// A probe that fails `fails` times, then finds the router; it counts its calls.
+    fn probe_failing(
+        fails: usize,
+        calls: &std::cell::Cell<usize>,
+    ) -> impl FnMut() -> Result<(), usize> + '_ {
+        move || {
+            calls.set(calls.get() + 1);
+            if calls.get() > fails {
+                Ok(())
+            } else {
+                Err(calls.get())
+            }
+        }
+    }
+
+    #[test]
+    fn a_router_is_looked_for_in_attempts_each_a_window_long() {
+        let stop = StopFlag::default();
+        let ms = Duration::from_millis;
+        let said = std::cell::Cell::new(0);
+        let say = || said.set(said.get() + 1);
+        // One attempt, probed once a window: one probe, no waiting line, the failure kept.
+        let calls = std::cell::Cell::new(0);
+        let began = Instant::now();
+        let r = look_in_windows(1, ms(5000), ms(5000), &stop, say, probe_failing(9, &calls));
+        assert_eq!((r, calls.get(), said.get()), (Ok(Err(1)), 1, 0));
+        assert!(
+            began.elapsed() < ms(2500),
+            "the last attempt does not wait out its window"
+        );
+        // Three attempts: three probes a window apart, the waiting line once, the last
+        // failure returned.
+        let calls = std::cell::Cell::new(0);
+        let began = Instant::now();
+        let r = look_in_windows(3, ms(30), ms(30), &stop, say, probe_failing(9, &calls));
+        assert_eq!((r, calls.get(), said.get()), (Ok(Err(3)), 3, 1));
+        assert!(began.elapsed() >= ms(60));
+        // Found at the third probe of the first window: no waiting line.
+        let calls = std::cell::Cell::new(0);
+        let r = look_in_windows(2, ms(500), ms(5), &stop, say, probe_failing(2, &calls));
+        assert_eq!((r, calls.get(), said.get()), (Ok(Ok(())), 3, 1));
+        // Probed every 10 ms in a 100 ms window: several probes, within the window.
+        let calls = std::cell::Cell::new(0);
+        let r = look_in_windows(1, ms(100), ms(10), &stop, || {}, probe_failing(99, &calls));
+        assert!(
+            r == Ok(Err(calls.get())) && (2..=10).contains(&calls.get()),
+            "{}",
+            calls.get()
+        );
+        // Stopped: heard after the probe that failed, however many attempts are allowed.
+        stop.stop();
+        let calls = std::cell::Cell::new(0);
+        let r = look_in_windows(
+            u32::MAX,
+            ms(1000),
+            ms(1000),
+            &stop,
+            || {},
+            probe_failing(9, &calls),
+        );
+        assert_eq!((r, calls.get()), (Err(Stopped), 1));
     }
 
     #[test]

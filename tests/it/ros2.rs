@@ -439,6 +439,34 @@ fn with_no_router_ratelab_runs_one_and_ros_2_nodes_join_it_under_the_real_clock(
     assert!(clock.len() >= 80, "{} clock messages", clock.len());
 }
 
+/// With more than one attempt allowed, the nodes' session says it waits for the router
+/// after the first attempt fails, as `ratelab ros2`'s readers do, then runs one itself.
+#[test]
+fn the_nodes_session_says_it_waits_for_a_router_then_runs_one() {
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let (code, _, stderr) = ratelab(
+        &["run", "--clock", "virtual", "--duration", "1", "--ros2"],
+        &[
+            connect_to(&endpoint),
+            ("ZENOH_ROUTER_CHECK_ATTEMPTS", "2".into()),
+        ],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let lines: Vec<&str> = stderr.lines().collect();
+    let waiting = format!("[ratelab] waiting for a Zenoh router at {endpoint} (ZENOH_ROUTER_CHECK_ATTEMPTS=2: up to 2 attempts a second apart) ...");
+    let ran = format!("no Zenoh router answered at {endpoint}, so ratelab runs one there");
+    let at = |needle: &str| lines.iter().position(|l| l.contains(needle));
+    assert!(
+        matches!((at(&waiting), at(&ran)), (Some(w), Some(r)) if w < r),
+        "{stderr}"
+    );
+    assert_eq!(
+        stderr.matches("waiting for a Zenoh router").count(),
+        1,
+        "{stderr}"
+    );
+}
+
 #[test]
 fn a_second_clock_a_bad_domain_and_names_ros_2_refuses_are_said_in_one_line() {
     // Another /clock publisher on the domain (a simulator): refused before the run.
