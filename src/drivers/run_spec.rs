@@ -79,6 +79,14 @@ fn check_kills(kills: &[Fault], speech: Speech) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// A `qos` or `link` entry as it was given: `--qos /obs:depth=3` or `qos["/obs"]="depth=3"`.
+fn pairs_given(setting: Setting, topic: &str, pairs: &str, speech: Speech) -> String {
+    match speech {
+        Speech::Flags => format!("{} {topic}:{pairs}", setting.flag()),
+        Speech::Keywords => speech.entry(setting, topic, &format!("{pairs:?}")),
+    }
+}
+
 /// Scheduled commands checked: in order of time, each one the graph can take
 /// ([`Command::validate`]), refused as `commands[i]: …`.
 fn check_commands(commands: &[TimedCommand], graph: &GraphSpec) -> anyhow::Result<()> {
@@ -144,6 +152,67 @@ pub struct GraphSettings {
 }
 
 impl GraphSettings {
+    /// Two settings of one thing that differ are refused, naming both, as a rate given twice
+    /// on the command line (`--rate policy=10 --rate policy=20`) would have the last win
+    /// unseen: a node's rate, lease; a topic's history depth (by `depth` or by `qos`'s
+    /// `depth=`), each of its QoS keys and link keys. The same value twice says one thing and
+    /// is taken. A list of pairs that does not split is left to its own refusal.
+    fn check_each_set_once(&self, speech: Speech) -> anyhow::Result<()> {
+        // What each setting sets, its value, and how it was given.
+        let mut sets: Vec<(String, String, String)> = Vec::new();
+        for (node, hz) in &self.rates {
+            let given = speech.entry(Setting::Rate, node, hz);
+            sets.push((format!("the rate of node '{node}'"), hz.to_string(), given));
+        }
+        for (node, ms) in &self.leases_ms {
+            let given = speech.entry(Setting::Lease, node, ms);
+            sets.push((format!("the lease of node '{node}'"), ms.to_string(), given));
+        }
+        let depth_of = |topic: &str| format!("the history depth of topic '{topic}'");
+        for (topic, depth) in &self.depths {
+            let given = speech.entry(Setting::Depth, topic, depth);
+            sets.push((depth_of(topic), depth.to_string(), given));
+        }
+        for (setting, list) in [(Setting::Qos, &self.qos), (Setting::Link, &self.links)] {
+            for (topic, pairs) in list {
+                let Ok(split) = ratelab_core::qos::split_pairs(pairs) else {
+                    continue;
+                };
+                for (key, value) in split {
+                    let (what, value) = match (setting, key) {
+                        (Setting::Qos, "depth") => (
+                            depth_of(topic),
+                            value
+                                .parse::<usize>()
+                                .map_or(value.into(), |d| d.to_string()),
+                        ),
+                        (Setting::Qos, _) => {
+                            (format!("the QoS '{key}' of topic '{topic}'"), value.into())
+                        }
+                        _ => (
+                            format!("the link's '{key}' on topic '{topic}'"),
+                            value.into(),
+                        ),
+                    };
+                    sets.push((what, value, pairs_given(setting, topic, pairs, speech)));
+                }
+            }
+        }
+        let mut first: std::collections::HashMap<&str, (&str, &str)> = Default::default();
+        for (what, value, given) in &sets {
+            match first.get(what.as_str()) {
+                Some((v, was)) if v != value => {
+                    anyhow::bail!("{was} and {given} both set {what}; give one")
+                }
+                Some(_) => {}
+                None => {
+                    first.insert(what, (value, given));
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// The graph these settings describe: the file (or the chapter's) with every override
     /// applied, in order. Its QoS warnings are the caller's to show
     /// ([`GraphSpec::qos_warnings`]).
@@ -163,6 +232,7 @@ impl GraphSettings {
                 )
             }
         };
+        self.check_each_set_once(speech)?;
         let entry =
             |s: Setting, key: &str, value: &dyn std::fmt::Display| speech.entry(s, key, value);
         for (node, hz) in &self.rates {
@@ -184,10 +254,7 @@ impl GraphSettings {
         }
         for (setting, list) in [(Setting::Qos, &self.qos), (Setting::Link, &self.links)] {
             for (topic, pairs) in list {
-                let given = match speech {
-                    Speech::Flags => format!("{} {topic}:{pairs}", setting.flag()),
-                    Speech::Keywords => entry(setting, topic, &format!("{pairs:?}")),
-                };
+                let given = pairs_given(setting, topic, pairs, speech);
                 if setting == Setting::Link {
                     if let Some((k, _)) = ratelab_core::qos::split_pairs(pairs)
                         .map_err(|e| anyhow::anyhow!("{given}: {e}"))?
@@ -573,6 +640,65 @@ mod tests {
         assert_eq!(
             s.config(Speech::Flags).unwrap_err().to_string(),
             "--qos /action:depth=5 and --queue-depth (2) both set the history depth of topic '/action'; give one"
+        );
+    }
+
+    #[test]
+    fn one_thing_set_twice_with_two_values_is_refused_naming_both() {
+        let refused = |edit: &dyn Fn(&mut GraphSettings), speech| {
+            let mut s = spec();
+            edit(&mut s.graph);
+            s.config(speech).map(|_| ()).map_err(|e| e.to_string())
+        };
+        let rates = |g: &mut GraphSettings| {
+            g.rates.push(("policy".into(), 10.0));
+            g.rates.push(("policy".into(), 20.0));
+        };
+        assert_eq!(
+            refused(&rates, Speech::Flags).unwrap_err(),
+            "--rate policy=10 and --rate policy=20 both set the rate of node 'policy'; give one"
+        );
+        // The same value twice is one setting; two nodes are two.
+        let same = |g: &mut GraphSettings| {
+            g.rates.push(("policy".into(), 10.0));
+            g.rates.push(("policy".into(), 10.0));
+            g.rates.push(("sensor".into(), 20.0));
+        };
+        assert_eq!(refused(&same, Speech::Flags), Ok(()));
+        // A depth given by --depth and by a QoS's depth=, in Python's words.
+        let depths = |g: &mut GraphSettings| {
+            g.depths.push(("/obs".into(), 3));
+            g.qos
+                .push(("/obs".into(), "history=keep_last,depth=5".into()));
+        };
+        assert_eq!(
+            refused(&depths, Speech::Keywords).unwrap_err(),
+            "depth[\"/obs\"]=3 and qos[\"/obs\"]=\"history=keep_last,depth=5\" both set the history depth of topic '/obs'; give one"
+        );
+        // One QoS key in two --qos flags; other keys of one topic are apart.
+        let qos = |g: &mut GraphSettings| {
+            g.qos.push(("/action".into(), "deadline_ms=40".into()));
+            g.qos.push(("/action".into(), "lifespan_ms=60".into()));
+            g.qos.push(("/action".into(), "deadline_ms=50".into()));
+        };
+        assert_eq!(
+            refused(&qos, Speech::Flags).unwrap_err(),
+            "--qos /action:deadline_ms=40 and --qos /action:deadline_ms=50 both set the QoS 'deadline_ms' of topic '/action'; give one"
+        );
+        let links = |g: &mut GraphSettings| {
+            g.links.push(("/obs".into(), "loss=0.1".into()));
+            g.links.push(("/obs".into(), "loss=0.2,delay_ms=5".into()));
+        };
+        assert!(refused(&links, Speech::Flags)
+            .unwrap_err()
+            .ends_with("both set the link's 'loss' on topic '/obs'; give one"));
+        let leases = |g: &mut GraphSettings| {
+            g.leases_ms.push(("policy".into(), 100.0));
+            g.leases_ms.push(("policy".into(), 200.0));
+        };
+        assert_eq!(
+            refused(&leases, Speech::Flags).unwrap_err(),
+            "--lease policy=100 and --lease policy=200 both set the lease of node 'policy'; give one"
         );
     }
 

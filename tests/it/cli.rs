@@ -771,10 +771,21 @@ fn conflicting_rates_are_refused_and_a_fault_after_the_end_is_warned_about() {
         &["run", "--smoke", "--control-hz", "10", "--break"],
         "--break sets the policy to 5 Hz and --control-hz to 10 Hz; give one",
     );
+    // One flag given twice with two values: neither wins unseen.
+    assert_usage_error(
+        &["run", "--smoke", "--rate", "policy=5", "--rate", "policy=8"],
+        "--rate policy=5 and --rate policy=8 both set the rate of node 'policy'; give one",
+    );
+    assert_usage_error(
+        &["run", "--smoke", "--qos", "/obs:depth=3", "--qos", "/obs:depth=5"],
+        "--qos /obs:depth=3 and --qos /obs:depth=5 both set the history depth of topic '/obs'; give one",
+    );
     // The same value twice is no conflict.
     let o = ratelab(&[
         "run",
         "--smoke",
+        "--rate",
+        "policy=10",
         "--rate",
         "policy=10",
         "--control-hz",

@@ -320,6 +320,18 @@ def test_refusals_of_faults_and_of_the_chain_speak_in_keywords():
     assert "rate={'NODE': HZ}, depth={'TOPIC': N}" in line and "--" not in line, line
 
 
+def test_one_topic_s_depth_set_two_ways_is_refused_naming_both():
+    # depth= and qos='depth=' would leave one ignored: neither wins unseen.
+    with pytest.raises(ratelab.SettingError) as e:
+        ratelab.run(depth={"/obs": 3}, qos={"/obs": {"depth": 5}}, **VIRTUAL)
+    line = str(e.value)
+    assert line.startswith('depth["/obs"]=3 and qos["/obs"]='), line
+    assert line.endswith("both set the history depth of topic '/obs'; give one"), line
+    # The same depth both ways says one thing.
+    r = ratelab.run(depth={"/obs": 3}, qos={"/obs": "depth=3"}, **VIRTUAL)
+    assert r.metrics["topics"]["/obs"]["depth"] == 3, r.metrics["topics"]["/obs"]
+
+
 def test_a_brain_file_that_fails_to_load_keeps_its_exception_as_the_cause(tmp_path):
     # Its import failing or its `act` unable to take the observation is refused before the
     # run; the file's own exception, with its traceback, is the cause (`except ImportError`
