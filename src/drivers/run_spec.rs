@@ -155,10 +155,17 @@ impl GraphSettings {
     /// Two settings of one thing that differ are refused, naming both, as a rate given twice
     /// on the command line (`--rate policy=10 --rate policy=20`) would have the last win
     /// unseen: a node's rate, lease; a topic's history depth (by `depth` or by `qos`'s
-    /// `depth=`), each of its QoS keys and link keys. The same value twice says one thing and
-    /// is taken. A list of pairs that does not split is left to its own refusal.
+    /// `depth=`), each of its QoS keys and link keys (a link key by `link` or by `qos`,
+    /// which takes them too). The same value twice says one thing and is taken: numbers are
+    /// compared as numbers (`deadline_ms=40` is `deadline_ms=40.0`). A list of pairs that
+    /// does not split is left to its own refusal.
     fn check_each_set_once(&self, speech: Speech) -> anyhow::Result<()> {
-        // What each setting sets, its value, and how it was given.
+        // What each setting sets, its value (a number as its f64 says it), and how it was
+        // given.
+        let number = |v: &str| {
+            v.parse::<f64>()
+                .map_or_else(|_| v.to_string(), |x| x.to_string())
+        };
         let mut sets: Vec<(String, String, String)> = Vec::new();
         for (node, hz) in &self.rates {
             let given = speech.entry(Setting::Rate, node, hz);
@@ -179,22 +186,15 @@ impl GraphSettings {
                     continue;
                 };
                 for (key, value) in split {
-                    let (what, value) = match (setting, key) {
-                        (Setting::Qos, "depth") => (
-                            depth_of(topic),
-                            value
-                                .parse::<usize>()
-                                .map_or(value.into(), |d| d.to_string()),
-                        ),
-                        (Setting::Qos, _) => {
-                            (format!("the QoS '{key}' of topic '{topic}'"), value.into())
-                        }
-                        _ => (
-                            format!("the link's '{key}' on topic '{topic}'"),
-                            value.into(),
-                        ),
+                    let what = if setting == Setting::Qos && key == "depth" {
+                        depth_of(topic)
+                    } else if ratelab_core::qos::LINK_KEYS.contains(&key) {
+                        format!("the link's '{key}' on topic '{topic}'")
+                    } else {
+                        format!("the QoS '{key}' of topic '{topic}'")
                     };
-                    sets.push((what, value, pairs_given(setting, topic, pairs, speech)));
+                    let given = pairs_given(setting, topic, pairs, speech);
+                    sets.push((what, number(value), given));
                 }
             }
         }
@@ -232,7 +232,6 @@ impl GraphSettings {
                 )
             }
         };
-        self.check_each_set_once(speech)?;
         let entry =
             |s: Setting, key: &str, value: &dyn std::fmt::Display| speech.entry(s, key, value);
         for (node, hz) in &self.rates {
@@ -279,6 +278,8 @@ impl GraphSettings {
             spec.set_lease(node, *ms)
                 .map_err(|e| anyhow::anyhow!("{given}: {e}"))?;
         }
+        // After each entry's own checks (an unknown node, a depth of 0 said as such).
+        self.check_each_set_once(speech)?;
         if let Some(over) = self.executor {
             spec.set_executor(over);
         }
@@ -692,6 +693,32 @@ mod tests {
         assert!(refused(&links, Speech::Flags)
             .unwrap_err()
             .ends_with("both set the link's 'loss' on topic '/obs'; give one"));
+        // A link key by --qos (which takes link keys) and by --link is one setting.
+        let both = |g: &mut GraphSettings| {
+            g.qos.push(("/obs".into(), "loss=0.1".into()));
+            g.links.push(("/obs".into(), "loss=0.2".into()));
+        };
+        assert_eq!(
+            refused(&both, Speech::Flags).unwrap_err(),
+            "--qos /obs:loss=0.1 and --link /obs:loss=0.2 both set the link's 'loss' on topic '/obs'; give one"
+        );
+        // Numbers are compared as numbers.
+        let same = |g: &mut GraphSettings| {
+            g.qos.push(("/action".into(), "deadline_ms=40".into()));
+            g.qos
+                .push(("/action".into(), "deadline_ms=40.0,lifespan_ms=60".into()));
+            g.links.push(("/obs".into(), "loss=0.1".into()));
+            g.links.push(("/obs".into(), "loss=0.10".into()));
+        };
+        assert_eq!(refused(&same, Speech::Flags), Ok(()));
+        // An entry's own refusal comes first: an unknown node, not "both set".
+        let unknown = |g: &mut GraphSettings| {
+            g.rates.push(("nobody".into(), 5.0));
+            g.rates.push(("nobody".into(), 6.0));
+        };
+        assert!(refused(&unknown, Speech::Flags)
+            .unwrap_err()
+            .starts_with("--rate nobody=5: "));
         let leases = |g: &mut GraphSettings| {
             g.leases_ms.push(("policy".into(), 100.0));
             g.leases_ms.push(("policy".into(), 200.0));
