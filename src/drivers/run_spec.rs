@@ -185,6 +185,7 @@ impl GraphSettings {
                 let Ok(split) = ratelab_core::qos::split_pairs(pairs) else {
                     continue;
                 };
+                let given = pairs_given(setting, topic, pairs, speech);
                 for (key, value) in split {
                     let what = if setting == Setting::Qos && key == "depth" {
                         depth_of(topic)
@@ -193,8 +194,7 @@ impl GraphSettings {
                     } else {
                         format!("the QoS '{key}' of topic '{topic}'")
                     };
-                    let given = pairs_given(setting, topic, pairs, speech);
-                    sets.push((what, number(value), given));
+                    sets.push((what, number(value), given.clone()));
                 }
             }
         }

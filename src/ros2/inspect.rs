@@ -539,13 +539,12 @@ pub fn open(
     env: &super::session::SessionEnv,
     stop: &ratelab_runtime::scheduler::StopFlag,
 ) -> Result<zenoh::Session, Ros2Error> {
-    use super::session::RouterCheck;
+    use super::session::set;
     let given = connect
         .unwrap_or(super::session::DEFAULT_ROUTER)
         .to_string();
     let check = super::session::router_check(env.router_check_attempts.as_deref())
         .map_err(Ros2Error::Usage)?;
-    use super::session::set;
     let mut config = zenoh::Config::default();
     set(&mut config, "mode", "\"client\"")?;
     set(&mut config, "scouting/multicast/enabled", "false")?;
@@ -568,15 +567,10 @@ pub fn open(
         check_router_endpoint(e)?;
     }
     let endpoint = printable(&endpoints.join(", "));
-    let attempts = match check {
-        RouterCheck::Attempts(n) => n,
-        RouterCheck::Skip => 1,
-        RouterCheck::Forever => u32::MAX,
-    };
     // Each attempt is one session opened (a client opens only with its router there).
     let probe = || zenoh::open(config.clone()).wait();
     let every = Duration::from_secs(1);
-    match super::session::look_for_router(check, attempts, &endpoint, stop, every, probe)? {
+    match super::session::look_for_router(check, &endpoint, stop, every, probe)? {
         Ok(session) => Ok(session),
         Err(failed) => Err(no_router(&endpoint, &failed.to_string())),
     }

@@ -208,10 +208,10 @@ const PROBE_EVERY: Duration = Duration::from_millis(20);
 /// One of `ZENOH_ROUTER_CHECK_ATTEMPTS`' attempts.
 const ATTEMPT: Duration = Duration::from_secs(1);
 
-/// Look for a router as `ZENOH_ROUTER_CHECK_ATTEMPTS` says: `attempts` attempts of one
-/// second each (`check` is what it was read as, for the waiting line), `probe` tried at the
-/// start of each and again `every` after each failed try within it. After the first attempt
-/// fails, when more are allowed, one line on
+/// Look for a router as `ZENOH_ROUTER_CHECK_ATTEMPTS` says (`check`): its attempts of one
+/// second each (one for [`RouterCheck::Skip`]: a caller that may go on without a router
+/// does not call this), `probe` tried at the start of each and again `every` after each
+/// failed try within it. After the first attempt fails, when more are allowed, one line on
 /// stderr says it waits and where (`endpoint`, printable). `stop` (Ctrl-C) is heard between
 /// tries, every 20 ms. The nodes' session ([`open`]) and `ratelab ros2`'s readers
 /// ([`super::inspect::open`]) both look so.
@@ -223,12 +223,16 @@ const ATTEMPT: Duration = Duration::from_secs(1);
 /// [`Ros2Error::Usage`]: stopped while waiting.
 pub(crate) fn look_for_router<T, E>(
     check: RouterCheck,
-    attempts: u32,
     endpoint: &str,
     stop: &StopFlag,
     every: Duration,
     probe: impl FnMut() -> Result<T, E>,
 ) -> Result<Result<T, E>, Ros2Error> {
+    let attempts = match check {
+        RouterCheck::Attempts(n) => n,
+        RouterCheck::Forever => u32::MAX,
+        RouterCheck::Skip => 1,
+    };
     let waiting = || {
         let how_long = match check {
             RouterCheck::Forever => "0: until one answers".to_string(),
@@ -339,14 +343,12 @@ pub fn open(env: &SessionEnv, stop: &StopFlag) -> Result<Ros2Session, Ros2Error>
         .cloned()
         .unwrap_or_else(|| DEFAULT_ROUTER.to_string());
     let session = open_with(config, "peer")?;
-    let attempts = match check {
-        RouterCheck::Skip => return Ok(Ros2Session::new(session, Router::Unchecked)),
-        RouterCheck::Forever => u32::MAX,
-        RouterCheck::Attempts(n) => n,
-    };
+    if check == RouterCheck::Skip {
+        return Ok(Ros2Session::new(session, Router::Unchecked));
+    }
     let shown = ratelab_core::text::printable(&endpoint).into_owned();
     let probe = || has_router(&session).then_some(()).ok_or(());
-    let looked = look_for_router(check, attempts, &shown, stop, PROBE_EVERY, probe)?;
+    let looked = look_for_router(check, &shown, stop, PROBE_EVERY, probe)?;
     if looked.is_ok() {
         return Ok(Ros2Session::new(session, Router::Found(endpoint)));
     }
