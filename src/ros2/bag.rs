@@ -193,27 +193,65 @@ fn io(what: &Path, e: impl std::fmt::Display) -> Ros2Error {
     Ros2Error::Usage(format!("--bag {}: {e}", what.display()))
 }
 
+/// An output check's refusal, which names its file itself.
+fn out(e: ratelab_core::output::OutputError) -> Ros2Error {
+    Ros2Error::Usage(format!("--bag: {e}"))
+}
+
 impl Bag {
     /// The bag's two files in `dir`: the MCAP file (named for the folder, as rosbag2
     /// names it) and `metadata.yaml`.
     fn files(dir: &Path) -> (PathBuf, PathBuf) {
-        let stem = std::path::absolute(dir)
-            .ok()
-            .and_then(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()))
-            .unwrap_or_else(|| "bag".into());
         (
-            dir.join(format!("{stem}_0.mcap")),
+            dir.join(format!("{}_0.mcap", Bag::stem(dir))),
             dir.join("metadata.yaml"),
         )
+    }
+
+    /// What the bag's MCAP files in `dir` are named for: the folder's name (`bag` when it
+    /// has none, as `/`).
+    fn stem(dir: &Path) -> String {
+        std::path::absolute(dir)
+            .ok()
+            .and_then(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .unwrap_or_else(|| "bag".into())
+    }
+
+    /// Every MCAP file in `dir` (a folder that exists), each once, with whether it is a
+    /// file of this folder's bag: `<stem>_<N>.mcap`, as rosbag2 names the files of a bag
+    /// split in several (`<stem>` the folder's name, `N` decimal digits). Read lazily:
+    /// `each` may stop the walk with an error.
+    ///
+    /// # Errors
+    /// The folder cannot be read, or `each`'s error.
+    fn each_mcap(
+        dir: &Path,
+        mut each: impl FnMut(&Path, bool) -> Result<(), Ros2Error>,
+    ) -> Result<(), Ros2Error> {
+        let prefix = format!("{}_", Bag::stem(dir));
+        for entry in std::fs::read_dir(dir).map_err(|e| io(dir, e))? {
+            let name = entry.map_err(|e| io(dir, e))?.file_name();
+            let name = name.to_string_lossy();
+            let Some(base) = name.strip_suffix(".mcap") else {
+                continue;
+            };
+            let ours = base
+                .strip_prefix(prefix.as_str())
+                .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()));
+            each(&dir.join(&*name), ours)?;
+        }
+        Ok(())
     }
 
     /// Check that a bag may be written in `dir` (before a run starts).
     ///
     /// # Errors
-    /// [`Ros2Error::Usage`]: `dir` exists and is not a folder, or holds a bag (either file)
-    /// and `force` is false, `dir` or one of them is a link, one of them is not a regular
-    /// file, or no file can be created there ([`ratelab_core::output::check_writable`]; the
-    /// folder is made).
+    /// [`Ros2Error::Usage`]: `dir` exists and is not a folder, or holds a bag (its
+    /// `metadata.yaml` or any of its `<folder>_<N>.mcap` files) and `force` is false, `dir`
+    /// or one of them is a link, one of them is not a regular file, `dir` holds an MCAP file
+    /// of another name (another bag's, `--force` or not: `ros2 bag reindex` would read it
+    /// with this one), or no file can be created there
+    /// ([`ratelab_core::output::check_writable`]; the folder is made).
     pub fn check(dir: &Path, force: bool) -> Result<(), Ros2Error> {
         // Never written through a link, as an output file never is (`--force` or not): the
         // bag's files would be another folder's, named for the link.
@@ -224,15 +262,41 @@ impl Bag {
             return Err(io(dir, "exists and is not a folder"));
         }
         let (mcap, meta) = Bag::files(dir);
+        if dir.is_dir() {
+            // No other bag's file: a folder's MCAP files are its bag (`ros2 bag reindex`
+            // takes every one), so another's would be read with this one. Said first, as
+            // `--force` does not mend it. This bag's other files (a bag rosbag2 split) are
+            // replaced as its first is.
+            let this_bag = mcap.file_name().unwrap_or_default().to_string_lossy();
+            let mut ours = None;
+            Bag::each_mcap(dir, |p, own| match own {
+                true => {
+                    ours.get_or_insert_with(|| p.to_path_buf());
+                    // A link or a folder is refused, --force or not.
+                    ratelab_core::output::check_target(p, true).map_err(out)
+                }
+                false => Err(io(
+                    p,
+                    format!(
+                        "an MCAP file of another bag in the folder (this one's is {this_bag}); \
+                         move it away or give --bag another folder"
+                    ),
+                )),
+            })?;
+            if let Some(p) = ours.filter(|_| !force) {
+                return Err(out(ratelab_core::output::OutputError::Exists(p)));
+            }
+        }
         for p in [&mcap, &meta] {
-            ratelab_core::output::check_writable(p, force).map_err(|e| io(p, e))?;
+            ratelab_core::output::check_writable(p, force).map_err(out)?;
         }
         Ok(())
     }
 
     /// Start a bag in folder `dir` (made if missing) with these topics, in order. With
-    /// `force`, a bag there is removed first (both files: a run cut short then leaves no
-    /// `metadata.yaml` of the old bag beside the new data).
+    /// `force`, a bag there is removed first (`metadata.yaml` and every one of its MCAP
+    /// files: a run cut short then leaves no `metadata.yaml` of the old bag beside the new
+    /// data, and no file of the old bag's is taken for the new one's).
     ///
     /// # Errors
     /// What [`Bag::check`] refuses, or the folder or file cannot be made.
@@ -240,12 +304,12 @@ impl Bag {
         Bag::check(dir, force)?;
         std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
         let (mcap_path, meta) = Bag::files(dir);
-        for p in [&mcap_path, &meta] {
-            match std::fs::remove_file(p) {
-                Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(io(p, e)),
-                _ => {}
-            }
-        }
+        let remove = |p: &Path| match std::fs::remove_file(p) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(io(p, e)),
+            _ => Ok(()),
+        };
+        remove(&meta)?;
+        Bag::each_mcap(dir, |p, ours| if ours { remove(p) } else { Ok(()) })?;
         // create_new: never through a link made since the check.
         let file = std::fs::OpenOptions::new()
             .write(true)
@@ -514,6 +578,62 @@ mod tests {
             "nothing written"
         );
         Bag::check(&real, false).unwrap();
+    }
+
+    #[test]
+    fn a_folder_holds_one_bag_its_split_files_replaced_with_force_and_another_bags_refused() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("run1");
+        std::fs::create_dir(&dir).unwrap();
+        let put = |name: &str| std::fs::write(dir.join(name), "old").unwrap();
+        let names = || {
+            let mut n: Vec<String> = std::fs::read_dir(&dir)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            n.sort();
+            n
+        };
+        // A bag split in two files by rosbag2 (run1_0.mcap, run1_1.mcap), and a file of
+        // the user's.
+        for f in ["run1_0.mcap", "run1_1.mcap", "metadata.yaml", "notes.txt"] {
+            put(f);
+        }
+        let e = Bag::check(&dir, false).unwrap_err().to_string();
+        assert!(e.contains("run1_0.mcap") && e.contains("--force"), "{e}");
+        // Its second file alone is a bag too.
+        std::fs::remove_file(dir.join("run1_0.mcap")).unwrap();
+        std::fs::remove_file(dir.join("metadata.yaml")).unwrap();
+        let e = Bag::check(&dir, false).unwrap_err().to_string();
+        assert!(e.contains("run1_1.mcap") && e.contains("--force"), "{e}");
+        // With --force, every file of the old bag goes; the user's file stays.
+        put("run1_0.mcap");
+        put("metadata.yaml");
+        Bag::create(&dir, true, &[]).unwrap().finish().unwrap();
+        assert_eq!(names(), ["metadata.yaml", "notes.txt", "run1_0.mcap"]);
+        assert_ne!(std::fs::read(dir.join("run1_0.mcap")).unwrap(), b"old");
+        // Another bag's file (a folder renamed, names close to this bag's) is refused,
+        // --force or not, and nothing is removed.
+        for other in ["old_0.mcap", "run1_.mcap", "run1_x.mcap", "run10.mcap"] {
+            put(other);
+            for force in [false, true] {
+                let e = Bag::check(&dir, force).unwrap_err().to_string();
+                assert!(
+                    e.ends_with(&format!(
+                        "{other}: an MCAP file of another bag in the folder (this one's is \
+                         run1_0.mcap); move it away or give --bag another folder"
+                    )),
+                    "{e}"
+                );
+            }
+            assert!(names().contains(&other.to_string()));
+            std::fs::remove_file(dir.join(other)).unwrap();
+        }
+        // A link named as this bag's file is never followed, --force or not.
+        std::os::unix::fs::symlink(dir.join("notes.txt"), dir.join("run1_3.mcap")).unwrap();
+        let e = Bag::check(&dir, true).unwrap_err().to_string();
+        assert!(e.contains("run1_3.mcap: is a symbolic link"), "{e}");
+        assert_eq!(std::fs::read(dir.join("notes.txt")).unwrap(), b"old");
     }
 
     #[test]

@@ -807,6 +807,21 @@ fn a_bag_of_the_run_reads_back_with_rosbags_every_message_the_same_on_every_run(
     let ((code, _, stderr), _) = bag("first", &["--force"]);
     assert_eq!(code, 0, "{stderr}");
     assert_eq!(read_bag(&first)["count"], 157);
+    // Another bag's MCAP file in the folder is never bagged beside this one's, --force or
+    // not: one line, exit 2, nothing removed.
+    let stray = first.join("second_0.mcap");
+    std::fs::copy(second.join("second_0.mcap"), &stray).unwrap();
+    let ((code, stdout, stderr), _) = bag("first", &["--force"]);
+    assert_eq!(code, 2, "{stdout}{stderr}");
+    assert_eq!(
+        stderr.trim_end(),
+        format!(
+            "error: --bag {}: an MCAP file of another bag in the folder (this one's is \
+             first_0.mcap); move it away or give --bag another folder",
+            stray.display()
+        )
+    );
+    assert!(stray.exists() && first.join("metadata.yaml").exists());
 }
 
 #[test]
