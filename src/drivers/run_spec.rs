@@ -484,12 +484,9 @@ impl RunSpec {
     /// leave one of them ignored, and are refused, as two settings of one node's rate are.
     fn check_one_depth(&self, depth: usize, speech: Speech) -> anyhow::Result<()> {
         let qos_depths = self.graph.qos.iter().filter_map(|(topic, pairs)| {
-            let pairs = ratelab_core::qos::split_pairs(pairs).ok()?;
-            let (_, v) = pairs.into_iter().find(|(k, _)| *k == "depth")?;
-            let given = match speech {
-                Speech::Flags => format!("{} {topic}:depth={v}", Setting::Qos.flag()),
-                Speech::Keywords => speech.entry(Setting::Qos, topic, &format!("'depth={v}'")),
-            };
+            let split = ratelab_core::qos::split_pairs(pairs).ok()?;
+            let (_, v) = split.into_iter().find(|(k, _)| *k == "depth")?;
+            let given = pairs_given(Setting::Qos, topic, pairs, speech);
             Some((topic, v.parse::<usize>().ok(), given))
         });
         let depths = (self.graph.depths.iter())
@@ -638,9 +635,15 @@ mod tests {
         s.graph
             .qos
             .push(("/action".into(), "history=keep_last,depth=5".into()));
+        // The QoS entry as it was given, whole, as the check of one setting given twice
+        // quotes it.
         assert_eq!(
             s.config(Speech::Flags).unwrap_err().to_string(),
-            "--qos /action:depth=5 and --queue-depth (2) both set the history depth of topic '/action'; give one"
+            "--qos /action:history=keep_last,depth=5 and --queue-depth (2) both set the history depth of topic '/action'; give one"
+        );
+        assert_eq!(
+            s.config(Speech::Keywords).unwrap_err().to_string(),
+            "qos[\"/action\"]=\"history=keep_last,depth=5\" and queue_depth (2) both set the history depth of topic '/action'; give one"
         );
     }
 
