@@ -50,8 +50,11 @@ pub fn call_cost(calls: usize) -> Result<(u64, u64), PythonError> {
 /// A brain that calls a Python function (see the module docs).
 pub struct PythonBrain {
     call: Py<PyAny>,
+    /// The file its code is in, for tracebacks.
     script: String,
-    function: String,
+    /// How the run names it (`FILE.py:FUNCTION`; `act in a notebook cell`).
+    shown: String,
+    /// What a message says is running: `the brain FILE.py:FUNCTION()`.
     what: String,
 }
 
@@ -99,7 +102,7 @@ impl PythonBrain {
             Ok(PythonBrain {
                 call: call.unbind(),
                 script: script.to_string(),
-                function: function.to_string(),
+                shown: format!("{script}:{function}"),
                 what: format!("the brain {script}:{function}()"),
             })
         })
@@ -109,7 +112,8 @@ impl PythonBrain {
 impl PythonBrain {
     /// A brain of the function object `function` the caller holds (`ratelab.run(policy=fn)`
     /// in a notebook): called as a `FILE.py:FUNCTION` brain is, so the same code gives
-    /// exactly the same run. Named in messages by the file and name of its code.
+    /// exactly the same run. Named by the file and name of its code, or, where its code has
+    /// no file (a notebook cell, the interpreter), by its name and where it was typed.
     ///
     /// # Errors
     /// [`PythonError::Script`] when it is not callable; [`PythonError::Interpreter`] without
@@ -120,7 +124,7 @@ impl PythonBrain {
             let made = support(py)?
                 .call_method1("callable_brain", (function,))
                 .and_then(|t| t.extract::<(Py<PyAny>, String, String)>());
-            let (call, script, function) = made.map_err(|e| {
+            let (call, script, shown) = made.map_err(|e| {
                 match e.is_instance_of::<pyo3::exceptions::PyImportError>(py) {
                     true => PythonError::Interpreter(format!(
                         "a Python brain gets its observation as a NumPy array, and NumPy cannot be imported ({})",
@@ -131,9 +135,9 @@ impl PythonBrain {
             })?;
             Ok(PythonBrain {
                 call,
-                what: format!("the brain {script}:{function}()"),
+                what: format!("the brain {shown}"),
                 script,
-                function,
+                shown,
             })
         })
     }
@@ -199,7 +203,7 @@ impl Policy for PythonBrain {
     }
 
     fn label(&self) -> String {
-        format!("Python brain {}:{}", self.script, self.function)
+        format!("Python brain {}", self.shown)
     }
 }
 

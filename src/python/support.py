@@ -147,7 +147,8 @@ def _restore_output(prev):
 
 def callable_brain(fn):
     """`brain_caller` for a function object the caller holds (`ratelab.run(policy=fn)`): the
-    same conversions as for `FILE.py:FUNCTION`, so the same code gives the same run."""
+    same conversions as for `FILE.py:FUNCTION`, so the same code gives the same run. Returns
+    the caller, the file its code names (for tracebacks) and how the run names the brain."""
     import types
 
     name = getattr(fn, "__name__", "act")
@@ -155,7 +156,16 @@ def callable_brain(fn):
         raise ContractError("policy", f"a {type(fn).__name__} is not a function")
     code = getattr(fn, "__code__", None)
     script = code.co_filename if code else "<callable>"
-    return brain_caller(types.SimpleNamespace(**{name: fn}), name, script), script, name
+    # How the run names it: by its file where it has one. A function typed into a notebook
+    # cell or the interpreter has none; its code's file name (a kernel's temporary name,
+    # new every session) would make one brain's runs differ by their label.
+    if os.path.isfile(script):
+        shown = f"{script}:{name}"
+    elif "ipykernel_" in script:
+        shown = f"{name} in a notebook cell"
+    else:
+        shown = f"{name} in {script}"
+    return brain_caller(types.SimpleNamespace(**{name: fn}), name, script), script, shown
 
 
 class ContractError(Exception):

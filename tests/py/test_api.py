@@ -505,11 +505,15 @@ def test_a_run_from_inside_a_brain_is_refused_not_waited_for():
         "                           else 'not a RuntimeError')",
         "    return 0.0",
         "outer = ratelab.run(clock='virtual', duration_s=0.3, policy=act)",
-        "print(repr(outer).split()[1]); print(refused[0])",
+        "print(repr(outer).split()[1]); print(refused[0]); print(outer.metrics['policy'])",
     ]))
-    verdict, refusal = said.splitlines()
+    verdict, refusal, label = said.splitlines()
     assert verdict == "balanced", said
-    assert refusal.startswith("ratelab.run() was called from inside a run (the brain"), said
+    # A function typed where there is no file is named by where it was typed, not by a
+    # file name that does not exist (a notebook cell's is a kernel's temporary name).
+    assert label == "Python brain act in <string>", said
+    assert refusal.startswith(
+        "ratelab.run() was called from inside a run (the brain act in <string>): "), said
     assert "start it after the run in progress returns" in refusal, said
 
 
