@@ -9,6 +9,8 @@
 # is its latency alone, for a before and after.
 # Usage: scripts/bench-image-ab.sh ROUNDS SIZES BINARY [BINARY...]   (SIZES: e.g. 1,4)
 # (build the floor first: cargo build --release --locked --example image_floor)
+# With BENCH_CPUS=LIST (taskset's: `0`, `0,1`) every launch and floor runs on those CPUs
+# alone, its processes with it (see scripts/bench-lockstep.sh).
 set -euo pipefail
 rounds=${1:?rounds}; sizes=${2:?sizes}; shift 2
 [ $# -ge 1 ] || { echo "usage: $0 ROUNDS SIZES BINARY [BINARY...]" >&2; exit 2; }
@@ -18,14 +20,15 @@ floor=$(realpath "$target/release/examples/image_floor")
 work=$(mktemp -d); trap 'rm -rf "$work"' EXIT
 mapfile -t graphs < <(python3 "$root/scripts/bench-image.py" --write-graphs "$work" --sizes "$sizes")
 read -ra mibs <<<"${sizes//,/ }"
+pin=(); [ -z "${BENCH_CPUS:-}" ] || pin=(taskset -c "$BENCH_CPUS")
 [ ${#graphs[@]} = ${#mibs[@]} ] || { echo "$0: no graphs written for sizes $sizes" >&2; exit 2; }
 for r in $(seq "$rounds"); do
   for i in "${!mibs[@]}"; do
     m=${mibs[$i]}
     for b in "$@"; do
-      out=$(cd "$work" && "$b" launch "${graphs[$i]}" --processes --clock real --duration 20 --headless 2>&1 || true)
+      out=$(cd "$work" && "${pin[@]}" "$b" launch "${graphs[$i]}" --processes --clock real --duration 20 --headless 2>&1 || true)
       echo "round $r $m MiB $b: $(grep -o "wire /image into 'vision': [0-9]* samples, p50 [0-9.]* µs" <<<"$out" || echo "no /image line")"
     done
-    echo "round $r $m MiB bare Zenoh: $("$floor" --count 600 --bytes $((m << 20)) | tail -1 | grep -o '"p50_us":[0-9.]*')"
+    echo "round $r $m MiB bare Zenoh: $("${pin[@]}" "$floor" --count 600 --bytes $((m << 20)) | tail -1 | grep -o '"p50_us":[0-9.]*')"
   done
 done
