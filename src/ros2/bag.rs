@@ -219,8 +219,9 @@ impl Bag {
 
     /// Every MCAP file in `dir` (a folder that exists), each once, with whether it is a
     /// file of this folder's bag: `<stem>_<N>.mcap`, as rosbag2 names the files of a bag
-    /// split in several (`<stem>` the folder's name, `N` decimal digits). Read lazily:
-    /// `each` may stop the walk with an error.
+    /// split in several (`<stem>` the folder's name as [`Bag::files`] writes it, `N` decimal
+    /// digits). Names are compared as bytes: a name that is not UTF-8 is never this bag's.
+    /// Read lazily: `each` may stop the walk with an error.
     ///
     /// # Errors
     /// The folder cannot be read, or `each`'s error.
@@ -228,17 +229,18 @@ impl Bag {
         dir: &Path,
         mut each: impl FnMut(&Path, bool) -> Result<(), Ros2Error>,
     ) -> Result<(), Ros2Error> {
+        use std::os::unix::ffi::OsStrExt as _;
         let prefix = format!("{}_", Bag::stem(dir));
         for entry in std::fs::read_dir(dir).map_err(|e| io(dir, e))? {
-            let name = entry.map_err(|e| io(dir, e))?.file_name();
-            let name = name.to_string_lossy();
-            let Some(base) = name.strip_suffix(".mcap") else {
+            let entry = entry.map_err(|e| io(dir, e))?;
+            let name = entry.file_name();
+            let Some(base) = name.as_bytes().strip_suffix(b".mcap") else {
                 continue;
             };
             let ours = base
-                .strip_prefix(prefix.as_str())
-                .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()));
-            each(&dir.join(&*name), ours)?;
+                .strip_prefix(prefix.as_bytes())
+                .is_some_and(|n| !n.is_empty() && n.iter().all(u8::is_ascii_digit));
+            each(&entry.path(), ours)?;
         }
         Ok(())
     }
@@ -249,8 +251,9 @@ impl Bag {
     /// [`Ros2Error::Usage`]: `dir` exists and is not a folder, or holds a bag (its
     /// `metadata.yaml` or any of its `<folder>_<N>.mcap` files) and `force` is false, `dir`
     /// or one of them is a link, one of them is not a regular file, `dir` holds an MCAP file
-    /// of another name (another bag's, `--force` or not: `ros2 bag reindex` would read it
-    /// with this one), or no file can be created there
+    /// of another name (another bag's, `--force` or not: a folder is one bag, and
+    /// `ros2 bag reindex` would take `old_0.mcap` for part of this one), or no file can be
+    /// created there
     /// ([`ratelab_core::output::check_writable`]; the folder is made).
     pub fn check(dir: &Path, force: bool) -> Result<(), Ros2Error> {
         // Never written through a link, as an output file never is (`--force` or not): the
@@ -263,15 +266,20 @@ impl Bag {
         }
         let (mcap, meta) = Bag::files(dir);
         if dir.is_dir() {
-            // No other bag's file: a folder's MCAP files are its bag (`ros2 bag reindex`
-            // takes every one), so another's would be read with this one. Said first, as
-            // `--force` does not mend it. This bag's other files (a bag rosbag2 split) are
-            // replaced as its first is.
+            // No other bag's MCAP file: a folder is one bag (`ros2 bag reindex` takes each
+            // `<name>_<N>.<ext>` file in it as its own), and another's beside this one would
+            // be taken for part of it. Said first, as `--force` does not mend it. This
+            // bag's other files (a bag rosbag2 split) are replaced as its first is.
             let this_bag = mcap.file_name().unwrap_or_default().to_string_lossy();
-            let mut ours = None;
+            // The one named when refused: the first of the split files (a folder lists its
+            // files in no set order).
+            let mut ours: Option<PathBuf> = None;
             Bag::each_mcap(dir, |p, own| match own {
                 true => {
-                    ours.get_or_insert_with(|| p.to_path_buf());
+                    let key = |p: &Path| (p.as_os_str().len(), p.to_path_buf());
+                    if ours.as_deref().is_none_or(|o| key(p) < key(o)) {
+                        ours = Some(p.to_path_buf());
+                    }
                     // A link or a folder is refused, --force or not.
                     ratelab_core::output::check_target(p, true).map_err(out)
                 }
@@ -582,6 +590,7 @@ mod tests {
 
     #[test]
     fn a_folder_holds_one_bag_its_split_files_replaced_with_force_and_another_bags_refused() {
+        use std::os::unix::ffi::OsStrExt as _;
         let tmp = tempfile::tempdir().unwrap();
         let dir = tmp.path().join("run1");
         std::fs::create_dir(&dir).unwrap();
@@ -626,9 +635,27 @@ mod tests {
                     "{e}"
                 );
             }
+            // Nor when the bag is started: nothing of the folder's is removed.
+            let before = names();
+            assert!(Bag::create(&dir, true, &[]).is_err());
+            assert_eq!(names(), before);
             assert!(names().contains(&other.to_string()));
             std::fs::remove_file(dir.join(other)).unwrap();
         }
+        // A name that is not UTF-8 is never this bag's.
+        let raw = std::ffi::OsStr::from_bytes(b"run1_\xff1.mcap");
+        std::fs::write(dir.join(raw), "old").unwrap();
+        let e = Bag::check(&dir, true).unwrap_err().to_string();
+        assert!(e.contains("an MCAP file of another bag"), "{e}");
+        std::fs::remove_file(dir.join(raw)).unwrap();
+        // A folder named as this bag's file is not a file to replace.
+        std::fs::create_dir(dir.join("run1_2.mcap")).unwrap();
+        let e = Bag::check(&dir, true).unwrap_err().to_string();
+        assert!(
+            e.contains("run1_2.mcap: exists and is not a regular file"),
+            "{e}"
+        );
+        std::fs::remove_dir(dir.join("run1_2.mcap")).unwrap();
         // A link named as this bag's file is never followed, --force or not.
         std::os::unix::fs::symlink(dir.join("notes.txt"), dir.join("run1_3.mcap")).unwrap();
         let e = Bag::check(&dir, true).unwrap_err().to_string();
