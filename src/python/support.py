@@ -158,11 +158,12 @@ def callable_brain(fn):
     script = code.co_filename if code else "<callable>"
     # How the run names it: by its file where it has one. A function typed into a notebook
     # cell or the interpreter has none; its code's file name (a kernel's temporary name,
-    # new every session) would make one brain's runs differ by their label.
-    if os.path.isfile(script):
-        shown = f"{script}:{name}"
-    elif "ipykernel_" in script:
+    # new every session, which Jupyter's debugger writes out) would make one brain's runs
+    # differ by their label.
+    if "ipykernel_" in script or script.startswith("<ipython-input-"):
         shown = f"{name} in a notebook cell"
+    elif os.path.isfile(script):
+        shown = f"{script}:{name}"
     else:
         shown = f"{name} in {script}"
     return brain_caller(types.SimpleNamespace(**{name: fn}), name, script), script, shown
