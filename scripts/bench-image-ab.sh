@@ -20,7 +20,11 @@ floor=$(realpath "$target/release/examples/image_floor")
 work=$(mktemp -d); trap 'rm -rf "$work"' EXIT
 mapfile -t graphs < <(python3 "$root/scripts/bench-image.py" --write-graphs "$work" --sizes "$sizes")
 read -ra mibs <<<"${sizes//,/ }"
-pin=(); [ -z "${BENCH_CPUS:-}" ] || pin=(taskset -c "$BENCH_CPUS")
+pin=()
+if [ -n "${BENCH_CPUS:-}" ]; then
+  taskset -c "$BENCH_CPUS" true || { echo "$0: BENCH_CPUS=$BENCH_CPUS: taskset cannot pin to it" >&2; exit 2; }
+  pin=(taskset -c "$BENCH_CPUS")
+fi
 [ ${#graphs[@]} = ${#mibs[@]} ] || { echo "$0: no graphs written for sizes $sizes" >&2; exit 2; }
 for r in $(seq "$rounds"); do
   for i in "${!mibs[@]}"; do

@@ -16,7 +16,11 @@ rounds=${1:?rounds}; dur=${2:?duration}; shift 2
 target=${CARGO_TARGET_DIR:-target}
 floor=$(realpath "$target/release/examples/zenoh_floor")
 work=$(mktemp -d); trap 'rm -rf "$work"' EXIT
-pin=(); [ -z "${BENCH_CPUS:-}" ] || pin=(taskset -c "$BENCH_CPUS")
+pin=()
+if [ -n "${BENCH_CPUS:-}" ]; then
+  taskset -c "$BENCH_CPUS" true || { echo "$0: BENCH_CPUS=$BENCH_CPUS: taskset cannot pin to it" >&2; exit 2; }
+  pin=(taskset -c "$BENCH_CPUS")
+fi
 measures=(direct router "$@")
 one() {
   case $1 in
