@@ -189,7 +189,15 @@ impl TickInbox {
     pub fn take(&mut self, index: u64) -> Option<Ticked> {
         let m = self.ahead.remove(&index)?;
         self.next = index + 1;
-        self.ahead = self.ahead.split_off(&self.next);
+        // Those before it given up where they are, at the map's front: splitting the map
+        // there moved every report kept after it into a new map, at every take (the
+        // launcher follows a batch of 32 at a time).
+        while let Some(first) = self.ahead.first_entry() {
+            if *first.key() >= self.next {
+                break;
+            }
+            first.remove();
+        }
         Some(m)
     }
 }
@@ -521,6 +529,14 @@ pub(crate) mod tests {
         inbox.accept(report("robot", 4, sensor), &spec).unwrap();
         assert_eq!(inbox.take(2), None);
         assert!(inbox.ahead.is_empty());
+        // Taking a tick gives up those kept before it, and keeps those after it.
+        for i in [5, 6, 8] {
+            inbox.accept(report("robot", i, sensor), &spec).unwrap();
+        }
+        assert_eq!(inbox.take(6).map(|m| m.index), Some(6));
+        assert_eq!(inbox.ahead.keys().copied().collect::<Vec<_>>(), [8]);
+        assert_eq!(inbox.take(5), None, "given up");
+        assert_eq!(inbox.take(8).map(|m| m.index), Some(8));
     }
 
     #[test]
