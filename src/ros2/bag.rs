@@ -276,8 +276,9 @@ impl Bag {
             let mut ours: Option<PathBuf> = None;
             Bag::each_mcap(dir, |p, own| match own {
                 true => {
-                    let key = |p: &Path| (p.as_os_str().len(), p.to_path_buf());
-                    if ours.as_deref().is_none_or(|o| key(p) < key(o)) {
+                    let first =
+                        |a: &Path, b: &Path| (a.as_os_str().len(), a) < (b.as_os_str().len(), b);
+                    if ours.as_deref().is_none_or(|o| first(p, o)) {
                         ours = Some(p.to_path_buf());
                     }
                     // A link or a folder is refused, --force or not.
