@@ -11,7 +11,7 @@
 //! |---|---|---|
 //! | everyone | nothing | subscribers, queries, liveliness subscribers and queries on the graph's topics, tokens (`@node`, `@pub`, `@sub`, `@launcher`), figures (`@stats`), settings (`@setup`), log and end |
 //! | the launcher | control (`@ctl/*`), the end (`@ended`), progress lines (`@log`) | its token `@launcher`, the settings' queryable `@setup` (and its replies); subscribers to the launch's own traffic: reports (`@up`), ticks (`@ticked`; linked directly, the processes' batches of them, `@progress`), the samples it passes on (`@via`), control and relayed reports |
-//! | process `P` | the topics its nodes publish, on `@via/<topic>` for the launcher to pass on (in a launch linked directly, on the topic's own key), its reports `@up/P`, ticks `@ticked/P` (linked directly, also in batches for the launcher, `@progress/P`), counters `@stats/P` | its nodes' tokens `@node/P/*`, their endpoints' `@pub`/`@sub` tokens; subscribers to its own control `@ctl/P` and relayed reports `@relayed/P` (linked directly, also to the other processes' ticks `@ticked/*`) |
+//! | process `P` | the topics its nodes publish, on `@via/<topic>` for the launcher to pass on (in a launch linked directly, on the topic's own key), its reports `@up/P`, ticks `@ticked/P` (linked directly, also in batches for the launcher, `@progress/P`), counters `@stats/P` (and for the launcher alone, `@stats/P/counts`) | its nodes' tokens `@node/P/*`, their endpoints' `@pub`/`@sub` tokens; subscribers to its own control `@ctl/P` and relayed reports `@relayed/P` (linked directly, also to the other processes' ticks `@ticked/*`) |
 //! | an observer | nothing | nothing more |
 //! | the launcher's router | anything on the graph's keys | anything on the graph's keys |
 //! | a host's router, heard by the launcher's router | the processes' kinds of keys (`@up`, `@ticked`, `@via`, `@stats`) | node and endpoint tokens; reads of any key |
@@ -287,6 +287,7 @@ fn process_keys(
         keys.up_from(proc_name),
         keys.ticked(proc_name),
         keys.stats(proc_name),
+        keys.stats_counts(proc_name),
     ];
     if direct {
         // Its reports in batches, for the launcher to follow.
@@ -418,6 +419,13 @@ mod tests {
         );
         assert!(!policy.iter().any(|k| k.ends_with("obs")), "{policy:?}");
         assert!(!policy.iter().any(|k| k.contains("@ctl")), "{policy:?}");
+        // Its figures, whole and its counts alone (for the launcher), never another's.
+        for k in [keys.stats("policy"), keys.stats_counts("policy")] {
+            assert!(policy.contains(&k), "{k}: {policy:?}");
+        }
+        for k in [keys.stats("robot"), keys.stats_counts("robot")] {
+            assert!(!policy.contains(&k), "{k}: {policy:?}");
+        }
         assert_eq!(
             allowed(&acl, &Role::Launcher, "put"),
             [

@@ -416,9 +416,20 @@ impl Keys {
         format!("{}/@progress/{p}", self.prefix)
     }
 
-    /// Where each process publishes its live counters for `ratelab top`.
+    /// Where each process publishes its live counters for `ratelab top` and `ratelab lab
+    /// --attach` ([`process::LiveStats`], with the batch of steps, ticks and counter samples
+    /// since the last).
     pub fn stats(&self, p: &str) -> String {
         format!("{}/@stats/{p}", self.prefix)
+    }
+
+    /// Where each process publishes its counts alone (its [`process::LiveStats`] without the
+    /// batch) for its launcher, which carries a process's counts over when it dies mid-run.
+    /// Beside [`Keys::stats`], under the same access rules (`@stats/**`), and matched by
+    /// neither `@stats/*` subscription (`ratelab top`, the lab's monitor): a process builds
+    /// and sends its batch only while a watcher listens.
+    pub fn stats_counts(&self, p: &str) -> String {
+        format!("{}/@stats/{p}/counts", self.prefix)
     }
 }
 

@@ -98,27 +98,35 @@ pub(super) const CALLBACK_SEND_BUDGET: i64 = 4 * 1024;
 /// process is refused after this.
 pub const BUSY_RETRY: Duration = Duration::from_secs(5);
 
-/// The publisher of `process`'s live figures for `ratelab top` and `ratelab lab --attach`,
-/// every [`STATS_PERIOD`] and once more after the run (its last steps). Dropped under
-/// congestion (Zenoh's default): a watcher that stalls must never hold up the run or its
-/// reports. And at Zenoh's lowest priority, `Background`: each priority has its own queue
-/// of batches on a link, so a large graph's figures (hundreds of KB, in pieces, every
-/// 100 ms) never fill the queue the run's own messages need. At the default priority they
-/// did: under the virtual clock the ticks run, and put messages that must arrive, on the
-/// one Zenoh thread that empties that queue, so with a watcher attached a put found it
-/// full, Zenoh closed the link after 5 s and the process read its launcher gone.
+/// The publishers of `process`'s live figures, every [`STATS_PERIOD`] and once more after
+/// the run (its last steps): whole for `ratelab top` and `ratelab lab --attach`
+/// ([`Keys::stats`]), and its counts alone for the launcher ([`Keys::stats_counts`]).
+/// Dropped under congestion (Zenoh's default): a watcher that stalls must never hold up
+/// the run or its reports. And at Zenoh's lowest priority, `Background`: each priority has
+/// its own queue of batches on a link, so a large graph's figures (hundreds of KB, in
+/// pieces, every 100 ms) never fill the queue the run's own messages need. At the default
+/// priority they did: under the virtual clock the ticks run, and put messages that must
+/// arrive, on the one Zenoh thread that empties that queue, so with a watcher attached a
+/// put found it full, Zenoh closed the link after 5 s and the process read its launcher
+/// gone.
 ///
 /// # Errors
-/// [`DistError::Zenoh`] when it cannot be declared.
-fn stats_publisher(
+/// [`DistError::Zenoh`] when they cannot be declared.
+fn stats_publishers(
     session: &zenoh::Session,
     keys: &Keys,
     process: &str,
-) -> Result<zenoh::pubsub::Publisher<'static>, DistError> {
-    Ok(session
-        .declare_publisher(keys.stats(process))
-        .priority(zenoh::qos::Priority::Background)
-        .wait()?)
+) -> Result<stats::Figures, DistError> {
+    let declare = |key: String| {
+        session
+            .declare_publisher(key)
+            .priority(zenoh::qos::Priority::Background)
+            .wait()
+    };
+    Ok(stats::Figures {
+        whole: declare(keys.stats(process))?,
+        counts: declare(keys.stats_counts(process))?,
+    })
 }
 
 /// Run process `opts.process` until the launcher ends the run (or `stop`).
@@ -210,7 +218,7 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     let ticks: Arc<Vec<AtomicU64>> =
         Arc::new((0..spec.nodes.len()).map(|_| AtomicU64::new(0)).collect());
     let run_time = Arc::new(AtomicU64::new(0));
-    let stats_pub = stats_publisher(&session, &keys, &opts.process)?;
+    let figures = stats_publishers(&session, &keys, &opts.process)?;
     let share = Arc::new(Share {
         process: opts.process.clone(),
         cfg,
@@ -226,7 +234,7 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
         joined_at: AtomicU64::new(0),
     });
     let stats_done = StopFlag::new();
-    let stats_thread = spawn_figures(share.clone(), stats_pub, stats_done.clone())?;
+    let stats_thread = spawn_figures(share.clone(), figures, stats_done.clone())?;
     let result = run_share(
         core,
         &share,

@@ -1540,6 +1540,123 @@ fn hostile_bytes_on_the_control_keys_do_not_end_a_run() {
     drop(session);
 }
 
+/// A process's figures go whole, with their batch of steps, to whoever watches
+/// (`ratelab top`, `lab --attach`: `@stats/<p>`), and its counts alone to its launcher, on a
+/// key of their own (`@stats/<p>/counts`) that neither watcher's `@stats/*` matches: a
+/// process encodes its batch only while a watcher listens. Each key names its process.
+#[test]
+fn figures_go_whole_to_a_watcher_and_as_counts_alone_to_the_launcher() {
+    use ratelab::distributed::process::LiveStats;
+    use ratelab::distributed::zenoh::Wait;
+    use std::sync::{Arc, Mutex};
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let ep = format!("tls/127.0.0.1:{port}");
+    let creds_path = dir.path().join("creds.toml");
+    let launcher = bin()
+        .args([
+            "launch",
+            "--processes",
+            "--no-spawn",
+            "--clock",
+            "virtual",
+            "--duration",
+            "300",
+            "--listen",
+            &ep,
+            "--export-credentials",
+            creds_path.to_str().unwrap(),
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let until = Instant::now() + Duration::from_secs(20);
+    let creds = loop {
+        match ratelab::distributed::credentials::Credentials::load(&creds_path) {
+            Ok(c) => break c,
+            Err(e) => {
+                assert!(Instant::now() < until, "no credentials: {e}");
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        }
+    };
+    let role = ratelab::distributed::credentials::Role::Observer;
+    let access = ratelab::distributed::Access {
+        credentials: &creds,
+        role: &role,
+        spec: None,
+    };
+    let session =
+        ratelab::distributed::open_session(&[], std::slice::from_ref(&ep), access).unwrap();
+    let keys = ratelab::distributed::Keys::new("cartpole");
+    let heard = |key: String| {
+        let got: Arc<Mutex<Vec<(String, LiveStats)>>> = Arc::default();
+        let into = got.clone();
+        let sub = session
+            .declare_subscriber(key)
+            .callback(move |s| {
+                let key = s.key_expr().as_str().to_string();
+                let m = LiveStats::from_sample(&s).unwrap_or_else(|| panic!("{key}: refused"));
+                into.lock().unwrap().push((key, m));
+            })
+            .wait()
+            .unwrap();
+        (sub, got)
+    };
+    let (_whole_sub, whole) = heard(keys.stats("*"));
+    let (_counts_sub, counts) = heard(format!("{}/@stats/*/counts", keys.prefix()));
+    let nodes = hand_started(&ep, &creds_path, Stdio::null);
+    let o = launcher.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}{}", text(&o.stdout), text(&o.stderr));
+    for mut n in nodes {
+        assert!(n.wait().unwrap().success());
+    }
+    std::thread::sleep(Duration::from_millis(300)); // the last figures, after the reports
+    drop(session);
+    let (whole, counts) = (whole.lock().unwrap(), counts.lock().unwrap());
+    for p in ["robot", "policy"] {
+        let of = |got: &[(String, LiveStats)]| -> Vec<LiveStats> {
+            got.iter()
+                .filter(|(_, m)| m.process == p)
+                .map(|(_, m)| m.clone())
+                .collect()
+        };
+        let (w, c) = (of(&whole), of(&counts));
+        assert!(
+            !w.is_empty() && !c.is_empty(),
+            "{p}: {} whole, {} counts",
+            w.len(),
+            c.len()
+        );
+        // Counts alone: the nodes' ticks and the topics' counters, never a batch.
+        for m in &c {
+            assert!(
+                m.steps.is_empty() && m.ticks.is_empty() && m.counters.is_empty(),
+                "{p}: {m:?}"
+            );
+            assert!(!m.nodes.is_empty(), "{p}: {m:?}");
+        }
+        assert!(c.iter().any(|m| m.done), "{p}: no last counts");
+        assert!(w.iter().any(|m| m.done), "{p}: no last figures");
+        // Whole: the batch, steps from the actuator's process, counter samples from the
+        // holder of /obs and /action.
+        if p == "robot" {
+            assert!(w.iter().any(|m| !m.steps.is_empty()), "{p}: no steps");
+        }
+        assert!(
+            w.iter().any(|m| !m.counters.is_empty()),
+            "{p}: no counter samples"
+        );
+    }
+    for (key, m) in whole.iter().chain(counts.iter()) {
+        assert!(key.contains(&format!("/@stats/{}", m.process)), "{key}");
+    }
+    assert!(counts.iter().all(|(k, _)| k.ends_with("/counts")));
+    assert!(whole.iter().all(|(k, _)| !k.ends_with("/counts")));
+}
+
 #[test]
 fn a_sensor_away_from_the_plant_is_refused() {
     let dir = tempfile::tempdir().unwrap();

@@ -57,7 +57,7 @@ impl Launch<'_> {
             _stats_subs.push(
                 self.link
                     .session
-                    .declare_subscriber(self.link.keys.stats(p))
+                    .declare_subscriber(self.link.keys.stats_counts(p))
                     .callback(move |s| {
                         if let Some(m) = LiveStats::from_sample(&s) {
                             if let Some(outbox) = &outbox {

@@ -48,7 +48,8 @@ impl Launch<'_> {
     ) -> Result<(RunEnd, Option<LockstepCost>), DistError> {
         let (spec, names, link) = (self.spec, &self.names, &self.link);
         let relay = &relaying.relay;
-        // Each process's newest figures (every `STATS_PERIOD`): a process that dies mid-run
+        // Each process's newest counts (its figures without their batch, `Keys::stats_counts`,
+        // every `STATS_PERIOD`): a process that dies mid-run
         // never reports, and its topics read what it had counted by then ([`Carried`]), as
         // under the real clock, not nothing received. Kept as they came (a sample holds its
         // bytes by reference) and decoded once, after the run: the callback runs on the
@@ -59,7 +60,7 @@ impl Launch<'_> {
             let (newest, p2) = (newest.clone(), p.to_string());
             _figures.push(
                 link.session
-                    .declare_subscriber(link.keys.stats(p))
+                    .declare_subscriber(link.keys.stats_counts(p))
                     .callback(move |s| {
                         ratelab_runtime::graph::lock(&newest).insert(p2.clone(), s);
                     })

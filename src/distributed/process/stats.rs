@@ -100,14 +100,27 @@ impl LiveStats {
         }
     }
 
-    /// A process's figures from a sample on its stats key ([`super::Keys::stats`]), as
-    /// [`LiveStats::decode`] takes them; `None` as well when they name another process than
-    /// the key's (a process's figures count only from its own key).
+    /// A process's figures from a sample on its stats key ([`super::Keys::stats`], or
+    /// [`super::Keys::stats_counts`]), as [`LiveStats::decode`] takes them; `None` as well
+    /// when they name another process than the key's (a process's figures count only from
+    /// its own key).
     pub fn from_sample(sample: &zenoh::sample::Sample) -> Option<LiveStats> {
-        let from = sample.key_expr().as_str().rsplit('/').next().unwrap_or("");
+        let from = stats_key_process(sample.key_expr().as_str());
         LiveStats::decode(&sample.payload().to_bytes())
             .ok()
             .filter(|m| m.process == from)
+    }
+}
+
+/// The process a key of figures names: `…/@stats/<p>` or `…/@stats/<p>/counts` (names of
+/// processes are letters, digits, `_` and `-`, so neither holds a `/` or an `@`); `""` for
+/// a key of neither shape.
+fn stats_key_process(key: &str) -> &str {
+    let mut chunks = key.rsplit('/');
+    match (chunks.next(), chunks.next(), chunks.next()) {
+        (Some("counts"), Some(p), Some("@stats")) => p,
+        (Some(p), Some("@stats"), _) => p,
+        _ => "",
     }
 }
 
@@ -190,15 +203,38 @@ impl ratelab_runtime::graph::StepObserver for StepTap {
     }
 }
 
-/// Start the thread that puts this process's figures ([`LiveStats`]) on `stats_pub` every
-/// [`STATS_PERIOD`] for `ratelab top` and `ratelab lab --attach`, and once more after
-/// `done` (the run's last steps).
+/// A process's two publishers of its figures ([`super::stats_publishers`]).
+pub(super) struct Figures {
+    /// Whole, batch included ([`super::Keys::stats`]): for watchers.
+    pub(super) whole: zenoh::pubsub::Publisher<'static>,
+    /// Its counts alone ([`super::Keys::stats_counts`]): for the launcher.
+    pub(super) counts: zenoh::pubsub::Publisher<'static>,
+}
+
+/// Whether anyone subscribes to what `publisher` puts (Zenoh's matching status, from the
+/// subscriptions declared to this session: a put is routed by the same). When the status
+/// cannot be had, yes: figures are sent rather than lost.
+fn heard(publisher: &zenoh::pubsub::Publisher<'_>) -> bool {
+    publisher
+        .matching_status()
+        .wait()
+        .map_or(true, |m| m.matching())
+}
+
+/// Start the thread that puts this process's figures ([`LiveStats`]) every
+/// [`STATS_PERIOD`], and once more after `done` (the run's last steps): whole on
+/// `figures.whole` while a watcher listens (`ratelab top`, `ratelab lab --attach`), its
+/// counts alone on `figures.counts` while its launcher does. The batch is taken every
+/// period either way (it is bounded), but only encoded for a watcher: under the virtual
+/// clock a period's batch is a thousand steps or counter samples, hundreds of KB of JSON,
+/// which cost an instant of the chapter's launch nobody watches a tenth of its CPU, its
+/// encoding and its crossing to the launcher (BENCHMARKS.md, issue 76 item 4).
 ///
 /// # Errors
 /// [`DistError::Peer`] when the thread cannot start.
 pub(super) fn spawn_figures(
     share: Arc<Share>,
-    stats_pub: zenoh::pubsub::Publisher<'static>,
+    figures: Figures,
     done: StopFlag,
 ) -> Result<std::thread::JoinHandle<()>, DistError> {
     std::thread::Builder::new()
@@ -206,18 +242,51 @@ pub(super) fn spawn_figures(
         .spawn(move || loop {
             let last = done.is_stopped();
             let mut msg = share.live_stats();
-            {
-                let mut b = ratelab_runtime::graph::lock(&share.batch);
-                msg.steps = std::mem::take(&mut b.steps).into();
-                msg.ticks = std::mem::take(&mut b.ticks).into();
-                msg.counters = std::mem::take(&mut b.counters).into();
-            }
             msg.done = last;
-            let _ = stats_pub.put(wire::encode_json(&msg)).wait();
+            let (steps, ticks, counters) = {
+                let mut b = ratelab_runtime::graph::lock(&share.batch);
+                let b = &mut *b;
+                (
+                    std::mem::take(&mut b.steps),
+                    std::mem::take(&mut b.ticks),
+                    std::mem::take(&mut b.counters),
+                )
+            };
+            if heard(&figures.counts) {
+                let _ = figures.counts.put(wire::encode_json(&msg)).wait();
+            }
+            if heard(&figures.whole) {
+                msg.steps = steps.into();
+                msg.ticks = ticks.into();
+                msg.counters = counters.into();
+                let _ = figures.whole.put(wire::encode_json(&msg)).wait();
+            }
             if last {
                 break;
             }
             std::thread::sleep(STATS_PERIOD);
         })
         .map_err(|e| DistError::Peer(format!("cannot start a thread: {e}")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_key_of_figures_names_its_process_whole_or_counts_alone() {
+        let keys = super::super::Keys::new("cartpole");
+        for p in ["robot", "policy", "counts", "a-b_2"] {
+            assert_eq!(stats_key_process(&keys.stats(p)), p);
+            assert_eq!(stats_key_process(&keys.stats_counts(p)), p);
+        }
+        for other in [
+            "",
+            "counts",
+            "ratelab/cartpole/@ticked/robot",
+            "x/robot/counts",
+        ] {
+            assert_eq!(stats_key_process(other), "", "{other}");
+        }
+    }
 }
