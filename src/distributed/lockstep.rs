@@ -167,7 +167,7 @@ impl TickInbox {
     /// # Errors
     /// [`DistError::Peer`] when [`MAX_AHEAD`] reports are already waiting.
     pub fn accept(&mut self, m: Ticked, spec: &GraphSpec) -> Result<(), DistError> {
-        let genuine = m.node < spec.nodes.len() && spec.process_of(NodeId(m.node)) == m.process;
+        let genuine = m.node < spec.nodes.len() && spec.process_name(NodeId(m.node)) == m.process;
         if !genuine || m.index < self.next || self.ahead.contains_key(&m.index) {
             return Ok(());
         }

@@ -252,7 +252,7 @@ impl Fold {
         for &(node, now, late, took) in &m.ticks {
             // Only the process's own nodes, and only forward in time.
             let own =
-                node < self.spec.nodes.len() && self.spec.process_of(NodeId(node)) == m.process;
+                node < self.spec.nodes.len() && self.spec.process_name(NodeId(node)) == m.process;
             if own && self.last_tick[node] < Some(now) {
                 self.last_tick[node] = Some(now);
                 out.push(Telemetry::NodeTick {

@@ -661,8 +661,14 @@ impl GraphSpec {
     /// --processes`: the file's `process = "…"`, or by default `robot` for the nodes that
     /// touch the simulator (sensors and the actuator, as drivers touch hardware), for an
     /// external node (its proxy) its input's publisher's process, and the node's own name
-    /// for every other node.
+    /// for every other node. Owned; [`GraphSpec::process_name`] borrows it.
     pub fn process_of(&self, id: NodeId) -> String {
+        self.process_name(id).to_string()
+    }
+
+    /// [`GraphSpec::process_of`], borrowed from the graph: what a check of every tick
+    /// report asks, without an allocation.
+    pub fn process_name(&self, id: NodeId) -> &str {
         let mut at = id;
         // An external node's proxy goes with its input's publisher (through other external
         // nodes, at most once round the graph): that process offers the input to ROS 2
@@ -670,17 +676,15 @@ impl GraphSpec {
         for _ in 0..=self.nodes.len() {
             let n = self.node(at);
             match (&n.process, n.subscribes.first().copied()) {
-                (Some(p), _) => return p.clone(),
+                (Some(p), _) => return p,
                 (None, Some(t)) if n.kind.code() == Code::Ros2 && self.topic(t).publisher != id => {
                     at = self.topic(t).publisher;
                 }
-                (None, _) if n.kind.plant() != Plant::None => {
-                    return DEFAULT_ROBOT_PROCESS.to_string()
-                }
-                (None, _) => return n.name.clone(),
+                (None, _) if n.kind.plant() != Plant::None => return DEFAULT_ROBOT_PROCESS,
+                (None, _) => return &n.name,
             }
         }
-        self.node(id).name.clone()
+        &self.node(id).name
     }
 
     /// The placement: each process with its nodes (in tie-break order), processes in the
