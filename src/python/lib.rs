@@ -517,6 +517,20 @@ pub fn callback_of_this_thread() -> Option<(String, bool)> {
         .map(|r| (r.what.clone(), r.loading))
 }
 
+/// A call into learners' code of a run (not a trial's) that began at or before `since` and
+/// has run past its overrun without returning ([`OVERRUN_WARNING`], or its tick's
+/// [`OVERRUN_PERIODS`] periods), as the warnings name it, with how long it has run. The
+/// Python package asks this while a run waits for the process's one run: a callback that
+/// started a thread which calls `ratelab.run`, then joins it, holds the run the thread waits
+/// for, and neither could go on.
+pub fn overrunning_since(since: Instant) -> Option<(String, Duration)> {
+    lock_running()
+        .values()
+        .filter(|r| !r.trial && r.since <= since && r.since.elapsed() >= r.overrun)
+        .map(|r| (r.what.clone(), r.since.elapsed()))
+        .max_by_key(|(_, d)| *d)
+}
+
 /// Registers a call into learners' code for the watchdog and for [`interrupt_callbacks`];
 /// unregisters it when dropped. Create it while attached to the interpreter.
 pub struct CallbackGuard {

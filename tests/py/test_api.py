@@ -517,6 +517,37 @@ def test_a_run_from_inside_a_brain_is_refused_not_waited_for():
     assert "start it after the run in progress returns" in refusal, said
 
 
+def test_a_run_from_a_thread_a_brain_started_and_joins_is_refused_not_waited_for():
+    # The brain's thread calls ratelab.run and the brain joins it: the thread waited for the
+    # outer run, which waited for the brain, for good. Once the brain has overrun (2 s) the
+    # thread's run is refused, the join returns, and the outer run goes on to its end.
+    said = in_a_fresh_interpreter("\n".join([
+        "import faulthandler, threading, ratelab",
+        "faulthandler.dump_traceback_later(60, exit=True)",
+        "said = []",
+        "def inner():",
+        "    try:",
+        "        ratelab.run(clock='virtual', duration_s=0.1)",
+        "        said.append('ran')",
+        "    except ratelab.RunInProgress as e:",
+        "        said.append(str(e))",
+        "def act(obs):",
+        "    if not said:",
+        "        t = threading.Thread(target=inner)",
+        "        t.start()",
+        "        t.join()",
+        "    return 0.0",
+        "outer = ratelab.run(clock='virtual', duration_s=0.3, policy=act)",
+        "print(repr(outer).split()[1]); print(said[0])",
+    ]))
+    verdict, refusal = said.splitlines()[-2:]
+    assert verdict == "balanced", said
+    assert refusal.startswith(
+        "ratelab.run() waited for the run in progress, in which the brain act in <string> "
+        "has not returned for "), said
+    assert "started it, then joined it" in refusal, said
+
+
 def test_import_ratelab_does_not_import_numpy():
     # #76: `import ratelab` costs the package, not NumPy (the command imports it too).
     said = in_a_fresh_interpreter(
