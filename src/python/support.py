@@ -145,6 +145,28 @@ def _restore_output(prev):
             _capturing["before"] = None
 
 
+def _known_by(fn):
+    """The name a callable brain is shown by, and the code that says where it was written:
+    a function's own (`act`); a `functools.partial`'s function's, said so (`partial(act)`); a
+    callable object's class and its `__call__` (`Brain.__call__`). No code: `None`."""
+    import functools
+
+    inner, partials = fn, 0
+    while isinstance(inner, functools.partial):
+        inner, partials = inner.func, partials + 1
+    code = getattr(inner, "__code__", None)
+    name = getattr(inner, "__name__", None)
+    if code is None and not isinstance(inner, type):
+        call = getattr(type(inner), "__call__", None)
+        code = getattr(call, "__code__", None)
+        if code is not None:
+            name = f"{type(inner).__qualname__}.__call__"
+    shown = name or "act"
+    for _ in range(partials):
+        shown = f"partial({shown})"
+    return shown, code
+
+
 def callable_brain(fn):
     """`brain_caller` for a function object the caller holds (`ratelab.run(policy=fn)`): the
     same conversions as for `FILE.py:FUNCTION`, so the same code gives the same run. Returns
@@ -154,18 +176,18 @@ def callable_brain(fn):
     name = getattr(fn, "__name__", "act")
     if not callable(fn):
         raise ContractError("policy", f"a {type(fn).__name__} is not a function")
-    code = getattr(fn, "__code__", None)
+    shown_name, code = _known_by(fn)
     script = code.co_filename if code else "<callable>"
     # How the run names it: by its file where it has one. A function typed into a notebook
     # cell or the interpreter has none; its code's file name (a kernel's temporary name,
     # new every session, which Jupyter's debugger writes out) would make one brain's runs
     # differ by their label.
     if "ipykernel_" in script or script.startswith("<ipython-input-"):
-        shown = f"{name} in a notebook cell"
+        shown = f"{shown_name} in a notebook cell"
     elif os.path.isfile(script):
-        shown = f"{script}:{name}"
+        shown = f"{script}:{shown_name}"
     else:
-        shown = f"{name} in {script}"
+        shown = f"{shown_name} in {script}"
     return brain_caller(types.SimpleNamespace(**{name: fn}), name, script), script, shown
 
 

@@ -548,6 +548,22 @@ def test_a_run_from_a_thread_a_brain_started_and_joins_is_refused_not_waited_for
     assert "started it, then joined it" in refusal, said
 
 
+def test_a_partial_or_a_callable_object_as_a_brain_is_named_by_what_it_wraps():
+    # Neither has a name or code of its own: they were both `act in <callable>`.
+    said = in_a_fresh_interpreter("\n".join([
+        "import functools, ratelab",
+        "def act(obs, gain=1.0): return 0.0",
+        "class Brain:",
+        "    def __call__(self, obs): return 0.0",
+        "for b in (functools.partial(act, gain=2.0), Brain()):",
+        "    print(ratelab.run(clock='virtual', duration_s=0.1, policy=b).metrics['policy'])",
+    ]))
+    assert said.splitlines() == [
+        "Python brain partial(act) in <string>",
+        "Python brain Brain.__call__ in <string>",
+    ], said
+
+
 def test_import_ratelab_does_not_import_numpy():
     # #76: `import ratelab` costs the package, not NumPy (the command imports it too).
     said = in_a_fresh_interpreter(
