@@ -37,13 +37,14 @@ pub fn run_top(a: &TopArgs, stop: StopFlag) -> anyhow::Result<()> {
     let session = open_client(&connect, access)
         .map_err(|e| anyhow::anyhow!("cannot reach {}: {e}: {hint}", connect.join(", ")))?;
     let (tx, rx) = crossbeam_channel::bounded::<LiveStats>(1024);
+    // `top` shows counts: figures without the lab's batch (`Keys::stats_counts`).
     let _sub = session
-        .declare_subscriber("ratelab/*/@stats/*")
+        .declare_subscriber("ratelab/*/@stats/*/counts")
         .callback(move |s| {
             if let Some(mut m) = LiveStats::from_sample(&s) {
-                // `top` shows counters: the steps and ticks for the lab are not kept.
                 m.steps = Vec::new();
                 m.ticks = Vec::new();
+                m.counters = Vec::new();
                 let _ = tx.try_send(m);
             }
         })

@@ -11,7 +11,7 @@
 //! |---|---|---|
 //! | everyone | nothing | subscribers, queries, liveliness subscribers and queries on the graph's topics, tokens (`@node`, `@pub`, `@sub`, `@launcher`), figures (`@stats`), settings (`@setup`), log and end |
 //! | the launcher | control (`@ctl/*`), the end (`@ended`), progress lines (`@log`) | its token `@launcher`, the settings' queryable `@setup` (and its replies); subscribers to the launch's own traffic: reports (`@up`), ticks (`@ticked`; linked directly, the processes' batches of them, `@progress`), the samples it passes on (`@via`), control and relayed reports |
-//! | process `P` | the topics its nodes publish, on `@via/<topic>` for the launcher to pass on (in a launch linked directly, on the topic's own key), its reports `@up/P`, ticks `@ticked/P` (linked directly, also in batches for the launcher, `@progress/P`), counters `@stats/P` (and for the launcher alone, `@stats/P/counts`) | its nodes' tokens `@node/P/*`, their endpoints' `@pub`/`@sub` tokens; subscribers to its own control `@ctl/P` and relayed reports `@relayed/P` (linked directly, also to the other processes' ticks `@ticked/*`) |
+//! | process `P` | the topics its nodes publish, on `@via/<topic>` for the launcher to pass on (in a launch linked directly, on the topic's own key), its reports `@up/P`, ticks `@ticked/P` (linked directly, also in batches for the launcher, `@progress/P`), counters `@stats/P` (and its counts alone, `@stats/P/counts`, for the launcher and `ratelab top`) | its nodes' tokens `@node/P/*`, their endpoints' `@pub`/`@sub` tokens; subscribers to its own control `@ctl/P` and relayed reports `@relayed/P` (linked directly, also to the other processes' ticks `@ticked/*`) |
 //! | an observer | nothing | nothing more |
 //! | the launcher's router | anything on the graph's keys | anything on the graph's keys |
 //! | a host's router, heard by the launcher's router | the processes' kinds of keys (`@up`, `@ticked`, `@via`, `@stats`) | node and endpoint tokens; reads of any key |
@@ -145,8 +145,15 @@ pub fn acl(
     all_keys.extend(AT_KEYS.iter().map(|k| at(k)));
     // `ratelab top` and the processes look for any graph's launcher, settings, figures,
     // nodes and end (what they find is this launch's: no other peer can connect).
-    let discovery = ["@launcher", "@setup", "@stats/*", "@ended", "@node/*/*"]
-        .map(|k| format!("ratelab/*/{k}"));
+    let discovery = [
+        "@launcher",
+        "@setup",
+        "@stats/*",
+        "@stats/*/counts",
+        "@ended",
+        "@node/*/*",
+    ]
+    .map(|k| format!("ratelab/*/{k}"));
     all_keys.extend(discovery.iter().cloned());
     // What everyone may read: the graph's topics, tokens, figures, settings, log and end;
     // not the launch's own traffic (see the module's header).
@@ -511,6 +518,10 @@ mod tests {
             let observer = subs(&Role::Observer);
             assert!(observer.contains(&format!("{p}/**")), "{observer:?}");
             assert!(observer.contains(&format!("{p}/@stats/**")), "{observer:?}");
+            // `ratelab top` hears any graph's counts alone, as a watcher its whole figures.
+            for k in ["ratelab/*/@stats/*", "ratelab/*/@stats/*/counts"] {
+                assert!(observer.contains(&k.to_string()), "{k}: {observer:?}");
+            }
             assert!(
                 !observer
                     .iter()

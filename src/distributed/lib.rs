@@ -424,10 +424,11 @@ impl Keys {
     }
 
     /// Where each process publishes its counts alone (its [`process::LiveStats`] without the
-    /// batch) for its launcher, which carries a process's counts over when it dies mid-run.
-    /// Beside [`Keys::stats`], under the same access rules (`@stats/**`), and matched by
-    /// neither `@stats/*` subscription (`ratelab top`, the lab's monitor): a process builds
-    /// and sends its batch only while a watcher listens.
+    /// batch) for its launcher, which carries a process's counts over when it dies mid-run
+    /// and, under the real clock, hears from them that a process is running (silent, heard
+    /// again), and for `ratelab top`. Beside [`Keys::stats`], under the same access rules
+    /// (`@stats/**`), and matched by no `@stats/*` subscription (the lab's monitor): a
+    /// process builds and sends its batch only while a watcher listens.
     pub fn stats_counts(&self, p: &str) -> String {
         format!("{}/@stats/{p}/counts", self.prefix)
     }

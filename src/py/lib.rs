@@ -49,7 +49,7 @@ pyo3::create_exception!(
     _native,
     RunInProgress,
     PyRuntimeError,
-    "A run, sweep, cliff search or exercise started from inside a run's brain or node, or waiting on a run whose brain or node has not returned past its overrun (a thread it started and joined): the run in progress holds the process's one run until that callback returns."
+    "A run, sweep, cliff search or exercise started from inside a run's brain or node, or from a thread that such a callback is joining: the run in progress holds the process's one run until that callback returns."
 );
 
 pyo3::create_exception!(
@@ -181,9 +181,9 @@ fn os_error(kind: std::io::ErrorKind, text: String) -> PyErr {
 
 /// One run, sweep, cliff search or exercise of this process at a time: a second call from
 /// another thread waits for the first (the interpreter let go meanwhile, Ctrl-C heard),
-/// unless a callback of the run in progress that began before the wait has run past its
-/// overrun ([`ratelab::python::overrunning_since`]): likeliest, it waits for this thread
-/// (started it, then joined it), and the call is refused rather than left to wait for ever. A
+/// unless a callback of the run in progress is joining this thread
+/// ([`ratelab::python::callback_joining_this_thread`]: it started the thread, then waits
+/// for it), and the call is refused rather than left to wait for ever. A
 /// run's text log, its failed node's exception and the node classes given to it are the
 /// process's while it goes (`ratelab_core::textlog`'s sink, `ratelab::python`'s failure and
 /// classes), so two at once would mix their logs.
@@ -192,7 +192,7 @@ fn os_error(kind: std::io::ErrorKind, text: String) -> PyErr {
 /// KeyboardInterrupt while waiting; `RunInProgress` (a RuntimeError) at once when called
 /// from inside a run's node or brain (`call`, e.g. `ratelab.run`, is what it says was called): the outer run
 /// holds the lock until that callback returns, so waiting would never end; and while
-/// waiting, when a callback of the run in progress overruns (above).
+/// waiting, when a callback of the run in progress joins this thread (above).
 fn one_at_a_time(py: Python<'_>, call: &str) -> PyResult<std::sync::MutexGuard<'static, ()>> {
     if let Some((what, loading)) = ratelab::python::callback_of_this_thread() {
         // The likeliest way here: a node's or brain's script with a run at its top level,
@@ -207,20 +207,18 @@ fn one_at_a_time(py: Python<'_>, call: &str) -> PyResult<std::sync::MutexGuard<'
         )));
     }
     static ONE: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    let waiting_since = std::time::Instant::now();
     loop {
         match ONE.try_lock() {
             Ok(guard) => return Ok(guard),
             // A run that panicked left nothing of its own behind the lock.
             Err(std::sync::TryLockError::Poisoned(p)) => return Ok(p.into_inner()),
             Err(std::sync::TryLockError::WouldBlock) => {
-                if let Some((what, running)) = ratelab::python::overrunning_since(waiting_since) {
+                if let Some(what) = ratelab::python::callback_joining_this_thread(py) {
                     return Err(RunInProgress::new_err(format!(
-                        "{call}() waited for the run in progress, in which {what} has not \
-                         returned for {:.1} s: if that call waits for this thread (started \
-                         it, then joined it), neither could go on; start this run after the \
-                         run in progress returns",
-                        running.as_secs_f64()
+                        "{call}() was called from a thread that {what} of the run in \
+                         progress is joining: that run holds the process's one run until \
+                         its callback returns, so neither could go on; start this run after \
+                         the run in progress returns"
                     )));
                 }
                 py.detach(|| std::thread::sleep(SIGNAL_POLL / 5));

@@ -517,18 +517,34 @@ pub fn callback_of_this_thread() -> Option<(String, bool)> {
         .map(|r| (r.what.clone(), r.loading))
 }
 
-/// A call into learners' code of a run (not a trial's) that began at or before `since` and
-/// has run past its overrun without returning ([`OVERRUN_WARNING`], or its tick's
-/// [`OVERRUN_PERIODS`] periods), as the warnings name it, with how long it has run. The
-/// Python package asks this while a run waits for the process's one run: a callback that
-/// started a thread which calls `ratelab.run`, then joins it, holds the run the thread waits
-/// for, and neither could go on.
-pub fn overrunning_since(since: Instant) -> Option<(String, Duration)> {
-    lock_running()
-        .values()
-        .filter(|r| !r.trial && r.since <= since && r.since.elapsed() >= r.overrun)
-        .map(|r| (r.what.clone(), r.since.elapsed()))
-        .max_by_key(|(_, d)| *d)
+/// The call into learners' code of a run (not a trial's) that is joining the calling
+/// Python thread (inside `threading.Thread.join` on it, read from `sys._current_frames()`
+/// by the support module's `joining`), as the warnings name it; `None` when none is (or
+/// no run has called into Python yet). The Python package asks this while a run waits for
+/// the process's one run: a callback that started a thread which calls `ratelab.run`, then
+/// joins it, holds the run the thread waits for, and neither could go on.
+pub fn callback_joining_this_thread(py: Python<'_>) -> Option<String> {
+    let calls: Vec<(u64, String)> = lock_running()
+        .iter()
+        .filter(|(_, r)| !r.trial)
+        .map(|(t, r)| (*t, r.what.clone()))
+        .collect();
+    if calls.is_empty() {
+        return None;
+    }
+    let support = match SUPPORT.get() {
+        Some(Ok(m)) => m.bind(py),
+        _ => return None,
+    };
+    // SAFETY: PyThread_get_thread_ident only reads the calling thread's id.
+    let me = unsafe { pyo3::ffi::PyThread_get_thread_ident() } as u64;
+    let threads: Vec<u64> = calls.iter().map(|c| c.0).collect();
+    let joining: Option<u64> = support
+        .call_method1("joining", (threads, me))
+        .and_then(|r| r.extract())
+        .ok()
+        .flatten();
+    joining.and_then(|t| calls.into_iter().find(|c| c.0 == t).map(|c| c.1))
 }
 
 /// Registers a call into learners' code for the watchdog and for [`interrupt_callbacks`];

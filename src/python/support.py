@@ -145,10 +145,31 @@ def _restore_output(prev):
             _capturing["before"] = None
 
 
+def joining(threads, me):
+    """Which of `threads` (Python thread ids, each in a call into learners' code) is inside
+    `threading.Thread.join` on thread `me`, read from its frames: that thread's id, or
+    None. A frame's `self` there is the thread joined (`join`; before Python 3.13, also
+    `_wait_for_tstate_lock`)."""
+    frames = sys._current_frames()
+    for tid in threads:
+        f, depth = frames.get(tid), 0
+        while f is not None and depth < 256:
+            code = f.f_code
+            if (code.co_name in ("join", "_wait_for_tstate_lock")
+                    and os.path.basename(code.co_filename) == "threading.py"):
+                joined = f.f_locals.get("self")
+                if isinstance(joined, threading.Thread) and joined.ident == me:
+                    return tid
+            f, depth = f.f_back, depth + 1
+    return None
+
+
 def _known_by(fn):
-    """The name a callable brain is shown by, and the code that says where it was written:
-    a function's own (`act`); a `functools.partial`'s function's, said so (`partial(act)`); a
-    callable object's class and its `__call__` (`Brain.__call__`). No code: `None`."""
+    """The name a callable brain is shown by, and the file its code says it was written in
+    (`"<callable>"` when none says): a function's own (`act`); a `functools.partial`'s
+    function's, said so (`partial(act)`); a callable object's class and its `__call__`
+    (`Brain.__call__`), the class's own file when `__call__` is inherited (a
+    `torch.nn.Module`'s is torch's, not where the brain was written)."""
     import functools
 
     inner, partials = fn, 0
@@ -156,15 +177,22 @@ def _known_by(fn):
         inner, partials = inner.func, partials + 1
     code = getattr(inner, "__code__", None)
     name = getattr(inner, "__name__", None)
+    script = code.co_filename if code else "<callable>"
     if code is None and not isinstance(inner, type):
-        call = getattr(type(inner), "__call__", None)
-        code = getattr(call, "__code__", None)
-        if code is not None:
-            name = f"{type(inner).__qualname__}.__call__"
+        cls = type(inner)
+        name = f"{cls.__qualname__}.__call__"
+        own = cls.__dict__.get("__call__")
+        if getattr(own, "__code__", None) is not None:
+            script = own.__code__.co_filename
+        else:
+            try:
+                script = inspect.getfile(cls)
+            except (TypeError, OSError):  # a class of the interpreter's or a builtin's
+                pass
     shown = name or "act"
     for _ in range(partials):
         shown = f"partial({shown})"
-    return shown, code
+    return shown, script
 
 
 def callable_brain(fn):
@@ -176,8 +204,7 @@ def callable_brain(fn):
     name = getattr(fn, "__name__", "act")
     if not callable(fn):
         raise ContractError("policy", f"a {type(fn).__name__} is not a function")
-    shown_name, code = _known_by(fn)
-    script = code.co_filename if code else "<callable>"
+    shown_name, script = _known_by(fn)
     # How the run names it: by its file where it has one. A function typed into a notebook
     # cell or the interpreter has none; its code's file name (a kernel's temporary name,
     # new every session, which Jupyter's debugger writes out) would make one brain's runs

@@ -1542,8 +1542,11 @@ fn hostile_bytes_on_the_control_keys_do_not_end_a_run() {
 
 /// A process's figures go whole, with their batch of steps, to whoever watches
 /// (`ratelab top`, `lab --attach`: `@stats/<p>`), and its counts alone to its launcher, on a
-/// key of their own (`@stats/<p>/counts`) that neither watcher's `@stats/*` matches: a
+/// key of their own (`@stats/<p>/counts`) that a watcher's `@stats/*` does not match: a
 /// process encodes its batch only while a watcher listens. Each key names its process.
+/// (That the launcher hears the counts through the access rules is what
+/// `a_process_gone_for_good_is_named_missing_not_counted_as_zeros` shows: the dead
+/// process's counts carried over; and `top_lists_a_running_graph`, `top` reading them.)
 #[test]
 fn figures_go_whole_to_a_watcher_and_as_counts_alone_to_the_launcher() {
     use ratelab::distributed::process::LiveStats;

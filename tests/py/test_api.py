@@ -519,8 +519,9 @@ def test_a_run_from_inside_a_brain_is_refused_not_waited_for():
 
 def test_a_run_from_a_thread_a_brain_started_and_joins_is_refused_not_waited_for():
     # The brain's thread calls ratelab.run and the brain joins it: the thread waited for the
-    # outer run, which waited for the brain, for good. Once the brain has overrun (2 s) the
-    # thread's run is refused, the join returns, and the outer run goes on to its end.
+    # outer run, which waited for the brain, for good. The thread's run is refused (the
+    # brain is seen inside Thread.join on it), the join returns, and the outer run goes on.
+    # Here the brain joins on a later call than the one that started the thread.
     said = in_a_fresh_interpreter("\n".join([
         "import faulthandler, threading, ratelab",
         "faulthandler.dump_traceback_later(60, exit=True)",
@@ -531,21 +532,30 @@ def test_a_run_from_a_thread_a_brain_started_and_joins_is_refused_not_waited_for
         "        said.append('ran')",
         "    except ratelab.RunInProgress as e:",
         "        said.append(str(e))",
+        "started = []",
         "def act(obs):",
-        "    if not said:",
-        "        t = threading.Thread(target=inner)",
-        "        t.start()",
-        "        t.join()",
+        "    if not started:",
+        "        started.append(threading.Thread(target=inner))",
+        "        started[0].start()",
+        "    elif started[0].is_alive():",
+        "        started[0].join()",
         "    return 0.0",
         "outer = ratelab.run(clock='virtual', duration_s=0.3, policy=act)",
         "print(repr(outer).split()[1]); print(said[0])",
+        # Threads that only wait their turn still run one after another.
+        "done = []",
+        "ts = [threading.Thread(target=lambda: done.append(",
+        "      repr(ratelab.run(clock='virtual', duration_s=0.2)).split()[1])) for _ in range(3)]",
+        "[t.start() for t in ts]; [t.join() for t in ts]; print(done)",
     ]))
-    verdict, refusal = said.splitlines()[-2:]
+    verdict, refusal, turns = said.splitlines()[-3:]
     assert verdict == "balanced", said
-    assert refusal.startswith(
-        "ratelab.run() waited for the run in progress, in which the brain act in <string> "
-        "has not returned for "), said
-    assert "started it, then joined it" in refusal, said
+    assert refusal == (
+        "ratelab.run() was called from a thread that the brain act in <string> of the run in "
+        "progress is joining: that run holds the process's one run until its callback "
+        "returns, so neither could go on; start this run after the run in progress returns"
+    ), said
+    assert turns == "['balanced', 'balanced', 'balanced']", said
 
 
 def test_a_partial_or_a_callable_object_as_a_brain_is_named_by_what_it_wraps():

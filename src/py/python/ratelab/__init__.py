@@ -129,9 +129,8 @@ class RunInProgress(Error, RuntimeError):
     """`run`, `sweep`, `cliff` or `exercise` called from inside a run's brain or node (or a
     script's top level, which runs again when ratelab loads it): the run in progress holds
     the process's one run until that callback returns, so the call is refused at once
-    rather than left to wait for ever. Also raised in another thread waiting for the run in
-    progress when a callback of that run has not returned past its overrun (likeliest it
-    started that thread and joins it)."""
+    rather than left to wait for ever. Also raised in a thread that such a callback is
+    joining (it started the thread, then waits for it in `Thread.join`)."""
 
 
 class TraceTooLarge(Error, MemoryError):
