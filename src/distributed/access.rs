@@ -518,7 +518,7 @@ mod tests {
             let observer = subs(&Role::Observer);
             assert!(observer.contains(&format!("{p}/**")), "{observer:?}");
             assert!(observer.contains(&format!("{p}/@stats/**")), "{observer:?}");
-            // `ratelab top` hears any graph's counts alone, as a watcher its whole figures.
+            // An observer may hear any graph's figures, whole or its counts alone (`top`).
             for k in ["ratelab/*/@stats/*", "ratelab/*/@stats/*/counts"] {
                 assert!(observer.contains(&k.to_string()), "{k}: {observer:?}");
             }

@@ -99,8 +99,8 @@ pub(super) const CALLBACK_SEND_BUDGET: i64 = 4 * 1024;
 pub const BUSY_RETRY: Duration = Duration::from_secs(5);
 
 /// The publishers of `process`'s live figures, every [`STATS_PERIOD`] and once more after
-/// the run (its last steps): whole for `ratelab top` and `ratelab lab --attach`
-/// ([`Keys::stats`]), and its counts alone for the launcher ([`Keys::stats_counts`]).
+/// the run (its last steps): whole for `ratelab lab --attach` ([`Keys::stats`]), and its
+/// counts alone for the launcher and `ratelab top` ([`Keys::stats_counts`]).
 /// Dropped under congestion (Zenoh's default): a watcher that stalls must never hold up
 /// the run or its reports. And at Zenoh's lowest priority, `Background`: each priority has
 /// its own queue of batches on a link, so a large graph's figures (hundreds of KB, in

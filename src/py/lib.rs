@@ -213,7 +213,7 @@ fn one_at_a_time(py: Python<'_>, call: &str) -> PyResult<std::sync::MutexGuard<'
             // A run that panicked left nothing of its own behind the lock.
             Err(std::sync::TryLockError::Poisoned(p)) => return Ok(p.into_inner()),
             Err(std::sync::TryLockError::WouldBlock) => {
-                if let Some(what) = ratelab::python::callback_joining_this_thread(py) {
+                if let Some(what) = ratelab::python::callback_joining_this_thread(py)? {
                     return Err(RunInProgress::new_err(format!(
                         "{call}() was called from a thread that {what} of the run in \
                          progress is joining: that run holds the process's one run until \

@@ -518,33 +518,42 @@ pub fn callback_of_this_thread() -> Option<(String, bool)> {
 }
 
 /// The call into learners' code of a run (not a trial's) that is joining the calling
-/// Python thread (inside `threading.Thread.join` on it, read from `sys._current_frames()`
-/// by the support module's `joining`), as the warnings name it; `None` when none is (or
-/// no run has called into Python yet). The Python package asks this while a run waits for
-/// the process's one run: a callback that started a thread which calls `ratelab.run`, then
-/// joins it, holds the run the thread waits for, and neither could go on.
-pub fn callback_joining_this_thread(py: Python<'_>) -> Option<String> {
+/// Python thread with no timeout (inside `threading.Thread.join` on it, read from
+/// `sys._current_frames()` by the support module's `joining`), as the warnings name it;
+/// `None` when none is (or no run has called into Python yet). The Python package asks
+/// this while a run waits for the process's one run: a callback that started a thread
+/// which calls `ratelab.run`, then joins it, holds the run the thread waits for, and
+/// neither could go on. A callback waiting for the thread by other means (a queue, an
+/// event) is not seen.
+///
+/// # Errors
+/// What is not an `Exception` that the look raised (a KeyboardInterrupt from a signal
+/// handler that ran meanwhile): the caller's to raise. An `Exception` is taken as "none".
+pub fn callback_joining_this_thread(py: Python<'_>) -> PyResult<Option<String>> {
     let calls: Vec<(u64, String)> = lock_running()
         .iter()
         .filter(|(_, r)| !r.trial)
         .map(|(t, r)| (*t, r.what.clone()))
         .collect();
     if calls.is_empty() {
-        return None;
+        return Ok(None);
     }
     let support = match SUPPORT.get() {
         Some(Ok(m)) => m.bind(py),
-        _ => return None,
+        _ => return Ok(None),
     };
     // SAFETY: PyThread_get_thread_ident only reads the calling thread's id.
     let me = unsafe { pyo3::ffi::PyThread_get_thread_ident() } as u64;
     let threads: Vec<u64> = calls.iter().map(|c| c.0).collect();
-    let joining: Option<u64> = support
+    let joining: Option<u64> = match support
         .call_method1("joining", (threads, me))
         .and_then(|r| r.extract())
-        .ok()
-        .flatten();
-    joining.and_then(|t| calls.into_iter().find(|c| c.0 == t).map(|c| c.1))
+    {
+        Ok(t) => t,
+        Err(e) if e.is_instance_of::<pyo3::exceptions::PyException>(py) => None,
+        Err(e) => return Err(e),
+    };
+    Ok(joining.and_then(|t| calls.into_iter().find(|c| c.0 == t).map(|c| c.1)))
 }
 
 /// Registers a call into learners' code for the watchdog and for [`interrupt_callbacks`];

@@ -147,19 +147,20 @@ def _restore_output(prev):
 
 def joining(threads, me):
     """Which of `threads` (Python thread ids, each in a call into learners' code) is inside
-    `threading.Thread.join` on thread `me`, read from its frames: that thread's id, or
-    None. A frame's `self` there is the thread joined (`join`; before Python 3.13, also
-    `_wait_for_tstate_lock`)."""
+    `threading.Thread.join` on thread `me` with no timeout, read from its frames: that
+    thread's id, or None. A blocked join is among a thread's innermost frames (3.13:
+    `join` itself; before, `join` then `_wait_for_tstate_lock`); its `self` is the thread
+    joined. A join with a timeout ends on its own and is let be."""
     frames = sys._current_frames()
     for tid in threads:
         f, depth = frames.get(tid), 0
-        while f is not None and depth < 256:
+        while f is not None and depth < 8:
             code = f.f_code
-            if (code.co_name in ("join", "_wait_for_tstate_lock")
-                    and os.path.basename(code.co_filename) == "threading.py"):
-                joined = f.f_locals.get("self")
-                if isinstance(joined, threading.Thread) and joined.ident == me:
+            if code.co_name == "join" and os.path.basename(code.co_filename) == "threading.py":
+                joined, timeout = f.f_locals.get("self"), f.f_locals.get("timeout")
+                if isinstance(joined, threading.Thread) and joined.ident == me and timeout is None:
                     return tid
+                break
             f, depth = f.f_back, depth + 1
     return None
 
@@ -180,7 +181,7 @@ def _known_by(fn):
     script = code.co_filename if code else "<callable>"
     if code is None and not isinstance(inner, type):
         cls = type(inner)
-        name = f"{cls.__qualname__}.__call__"
+        name = name or f"{cls.__qualname__}.__call__"
         own = cls.__dict__.get("__call__")
         if getattr(own, "__code__", None) is not None:
             script = own.__code__.co_filename

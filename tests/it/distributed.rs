@@ -1541,7 +1541,7 @@ fn hostile_bytes_on_the_control_keys_do_not_end_a_run() {
 }
 
 /// A process's figures go whole, with their batch of steps, to whoever watches
-/// (`ratelab top`, `lab --attach`: `@stats/<p>`), and its counts alone to its launcher, on a
+/// (`lab --attach`: `@stats/<p>`), and its counts alone to its launcher and `top`, on a
 /// key of their own (`@stats/<p>/counts`) that a watcher's `@stats/*` does not match: a
 /// process encodes its batch only while a watcher listens. Each key names its process.
 /// (That the launcher hears the counts through the access rules is what

@@ -118,15 +118,18 @@ fn a_thousand_node_graph_across_eight_processes_equals_the_in_process_run() {
     }
 }
 
-/// A watcher attached to a large launch under the virtual clock (`ratelab top`, as a learner
-/// opens one beside it) never breaks the run. Each of the 8 processes' figures is hundreds
-/// of KB every 100 ms; sent at Zenoh's default priority they filled the queue of the
-/// process's link that its ticks' own puts needed, on the one Zenoh thread that empties
-/// it, and after 5 s Zenoh closed the link: the processes read their launcher gone and the
-/// run failed ("process 'ctl_2': the launcher went away", observed with `top` polled).
+/// Watchers attached to a large launch under the virtual clock (`ratelab top` polled, as a
+/// learner opens one beside it, and a subscriber to the whole figures, as `lab --attach`
+/// is) never break the run. Each of the 8 processes' whole figures is hundreds of KB every
+/// 100 ms; sent at Zenoh's default priority they filled the queue of the process's link
+/// that its ticks' own puts needed, on the one Zenoh thread that empties it, and after 5 s
+/// Zenoh closed the link: the processes read their launcher gone and the run failed
+/// ("process 'ctl_2': the launcher went away", observed with `top` polled, when `top` read
+/// the whole figures; it reads the counts alone now, so the subscriber is what sends them).
 #[test]
 fn a_watcher_never_breaks_a_large_launch_under_the_virtual_clock() {
     use crate::distributed::{bin, exit_within, free_port};
+    use ratelab::distributed::zenoh::Wait;
     let _m = crate::machine::shared();
     let dir = tempfile::tempdir().unwrap();
     let g = generated(dir.path(), "g.toml", 1000, 8);
@@ -145,6 +148,37 @@ fn a_watcher_never_breaks_a_large_launch_under_the_virtual_clock() {
         .spawn()
         .unwrap();
     let started = std::time::Instant::now();
+    let credentials = loop {
+        match ratelab::distributed::credentials::Credentials::load(&creds) {
+            Ok(c) => break c,
+            Err(e) => {
+                assert!(
+                    started.elapsed() < Duration::from_secs(60),
+                    "no credentials: {e}"
+                );
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        }
+    };
+    let role = ratelab::distributed::credentials::Role::Observer;
+    let access = ratelab::distributed::Access {
+        credentials: &credentials,
+        role: &role,
+        spec: None,
+    };
+    let session = ratelab::distributed::open_client(std::slice::from_ref(&ep), access).unwrap();
+    let batches = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let counted = batches.clone();
+    let _whole = session
+        .declare_subscriber("ratelab/*/@stats/*")
+        .callback(move |s| {
+            let m = ratelab::distributed::process::LiveStats::from_sample(&s);
+            if m.is_some_and(|m| !m.steps.is_empty() || !m.counters.is_empty()) {
+                counted.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            }
+        })
+        .wait()
+        .unwrap();
     let mut watched = 0;
     while launch.try_wait().unwrap().is_none() && started.elapsed() < Duration::from_secs(240) {
         let top = bin()
@@ -159,8 +193,11 @@ fn a_watcher_never_breaks_a_large_launch_under_the_virtual_clock() {
     let said = std::fs::read_to_string(dir.path().join("launch.err")).unwrap();
     assert!(status.success(), "{said}");
     assert!(!said.contains("went away"), "{said}");
-    // Watched through much of the run, not only its last moments.
+    // Watched through much of the run, not only its last moments, the whole figures with
+    // their batches too.
     assert!(watched >= 5, "watched {watched} times");
+    let batches = batches.load(std::sync::atomic::Ordering::Relaxed);
+    assert!(batches >= 5, "{batches} whole figures with a batch");
 }
 
 /// A launch of 64 processes (issue 51: "launches of 64+ processes"): a 256-node graph dealt

@@ -547,8 +547,20 @@ def test_a_run_from_a_thread_a_brain_started_and_joins_is_refused_not_waited_for
         "ts = [threading.Thread(target=lambda: done.append(",
         "      repr(ratelab.run(clock='virtual', duration_s=0.2)).split()[1])) for _ in range(3)]",
         "[t.start() for t in ts]; [t.join() for t in ts]; print(done)",
+        # A brain that joins with a timeout goes on by itself: its thread's run waits.
+        "later = []",
+        "def act2(obs):",
+        "    if not later:",
+        "        later.append(threading.Thread(target=lambda: later.append(",
+        "            repr(ratelab.run(clock='virtual', duration_s=0.1)).split()[1])))",
+        "        later[0].start()",
+        "    later[0].join(timeout=0.01)",
+        "    return 0.0",
+        "ratelab.run(clock='virtual', duration_s=0.1, policy=act2); later[0].join()",
+        "print(later[1:])",
     ]))
-    verdict, refusal, turns = said.splitlines()[-3:]
+    verdict, refusal, turns, waited = said.splitlines()[-4:]
+    assert waited == "['balanced']", said
     assert verdict == "balanced", said
     assert refusal == (
         "ratelab.run() was called from a thread that the brain act in <string> of the run in "

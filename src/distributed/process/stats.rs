@@ -1,13 +1,16 @@
-//! A process's live figures: what it publishes every [`STATS_PERIOD`] for `ratelab top`
-//! and `ratelab lab --attach` ([`LiveStats`]), and the bounded batch of steps, ticks and
-//! counter samples its nodes fill between two publications.
+//! A process's live figures: what it publishes every [`STATS_PERIOD`] ([`LiveStats`]),
+//! whole for `ratelab lab --attach` and its counts alone for its launcher and `ratelab top`,
+//! and the bounded batch of steps, ticks and counter samples its nodes fill between two
+//! publications.
 
 use super::{wire, DistError, GraphSpec, NodeId, Share, StepRecord, StopFlag, TopicId};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use zenoh::Wait;
 
-/// Live counters a process publishes for `ratelab top` (key `ratelab/<graph>/@stats/<p>`).
+/// Live counters a process publishes: whole, with the batch, on `ratelab/<graph>/@stats/<p>`
+/// for a watcher (`lab --attach`); its counts alone (no batch) on `…/@stats/<p>/counts` for
+/// its launcher and `ratelab top`.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LiveStats {
     /// The graph's name.
@@ -223,8 +226,9 @@ fn heard(publisher: &zenoh::pubsub::Publisher<'_>) -> bool {
 
 /// Start the thread that puts this process's figures ([`LiveStats`]) every
 /// [`STATS_PERIOD`], and once more after `done` (the run's last steps): whole on
-/// `figures.whole` while a watcher listens (`ratelab top`, `ratelab lab --attach`), its
-/// counts alone on `figures.counts` while its launcher does. The batch is taken every
+/// `figures.whole` while a watcher listens (`ratelab lab --attach`, the launch's own lab or
+/// recording), its counts alone on `figures.counts` while its launcher or `ratelab top`
+/// does. The batch is taken every
 /// period either way (it is bounded), but only encoded for a watcher: under the virtual
 /// clock a period's batch is a thousand steps or counter samples, hundreds of KB of JSON,
 /// which cost an instant of the chapter's launch nobody watches a tenth of its CPU, its
