@@ -210,7 +210,7 @@ impl ratelab_runtime::graph::StepObserver for StepTap {
 pub(super) struct Figures {
     /// Whole, batch included ([`super::Keys::stats`]): for watchers.
     pub(super) whole: zenoh::pubsub::Publisher<'static>,
-    /// Its counts alone ([`super::Keys::stats_counts`]): for the launcher.
+    /// Its counts alone ([`super::Keys::stats_counts`]): for the launcher and `ratelab top`.
     pub(super) counts: zenoh::pubsub::Publisher<'static>,
 }
 
@@ -228,11 +228,10 @@ fn heard(publisher: &zenoh::pubsub::Publisher<'_>) -> bool {
 /// [`STATS_PERIOD`], and once more after `done` (the run's last steps): whole on
 /// `figures.whole` while a watcher listens (`ratelab lab --attach`, the launch's own lab or
 /// recording), its counts alone on `figures.counts` while its launcher or `ratelab top`
-/// does. The batch is taken every
-/// period either way (it is bounded), but only encoded for a watcher: under the virtual
-/// clock a period's batch is a thousand steps or counter samples, hundreds of KB of JSON,
-/// which cost an instant of the chapter's launch nobody watches a tenth of its CPU, its
-/// encoding and its crossing to the launcher (BENCHMARKS.md, issue 76 item 4).
+/// does. The batch is taken every period either way (it is bounded), but only encoded for
+/// a watcher: under the virtual clock a period's batch is a thousand steps or counter
+/// samples, hundreds of KB of JSON, whose encoding cost the chapter's launch nobody
+/// watched about 2% of its CPU (BENCHMARKS.md, issue 76 item 4).
 ///
 /// # Errors
 /// [`DistError::Peer`] when the thread cannot start.
