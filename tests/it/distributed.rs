@@ -118,6 +118,32 @@ pub(crate) fn free_port() -> u16 {
 
 /// The chapter's two processes, linked directly: each hears the other's reports and
 /// samples over their own link.
+/// A watcher's session on the launch listening on `ep`: a client of its router (as `top`
+/// and the lab attached are), as the observer of the credentials the launch exports to
+/// `creds`, once they are written (within `within`).
+pub(crate) fn observer_of(
+    ep: &str,
+    creds: &Path,
+    within: Duration,
+) -> ratelab::distributed::zenoh::Session {
+    let until = Instant::now() + within;
+    let credentials = loop {
+        match ratelab::distributed::credentials::Credentials::load(creds) {
+            Ok(c) => break c,
+            Err(e) => {
+                assert!(Instant::now() < until, "no credentials: {e}");
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        }
+    };
+    let access = ratelab::distributed::Access {
+        credentials: &credentials,
+        role: &ratelab::distributed::credentials::Role::Observer,
+        spec: None,
+    };
+    ratelab::distributed::open_client(&[ep.to_string()], access).unwrap()
+}
+
 #[test]
 fn virtual_lockstep_is_byte_identical_to_the_in_process_run() {
     assert_lockstep_equals_in_process(&[], &["graphs/cartpole.toml"]);
@@ -1575,24 +1601,7 @@ fn figures_go_whole_to_a_watcher_and_as_counts_alone_to_the_launcher() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let until = Instant::now() + Duration::from_secs(20);
-    let creds = loop {
-        match ratelab::distributed::credentials::Credentials::load(&creds_path) {
-            Ok(c) => break c,
-            Err(e) => {
-                assert!(Instant::now() < until, "no credentials: {e}");
-                std::thread::sleep(Duration::from_millis(50));
-            }
-        }
-    };
-    let role = ratelab::distributed::credentials::Role::Observer;
-    let access = ratelab::distributed::Access {
-        credentials: &creds,
-        role: &role,
-        spec: None,
-    };
-    let session =
-        ratelab::distributed::open_session(&[], std::slice::from_ref(&ep), access).unwrap();
+    let session = observer_of(&ep, &creds_path, Duration::from_secs(20));
     let keys = ratelab::distributed::Keys::new("cartpole");
     let heard = |key: String| {
         let got: Arc<Mutex<Vec<(String, LiveStats)>>> = Arc::default();

@@ -148,25 +148,7 @@ fn a_watcher_never_breaks_a_large_launch_under_the_virtual_clock() {
         .spawn()
         .unwrap();
     let started = std::time::Instant::now();
-    let credentials = loop {
-        match ratelab::distributed::credentials::Credentials::load(&creds) {
-            Ok(c) => break c,
-            Err(e) => {
-                assert!(
-                    started.elapsed() < Duration::from_secs(60),
-                    "no credentials: {e}"
-                );
-                std::thread::sleep(Duration::from_millis(50));
-            }
-        }
-    };
-    let role = ratelab::distributed::credentials::Role::Observer;
-    let access = ratelab::distributed::Access {
-        credentials: &credentials,
-        role: &role,
-        spec: None,
-    };
-    let session = ratelab::distributed::open_client(std::slice::from_ref(&ep), access).unwrap();
+    let session = crate::distributed::observer_of(&ep, &creds, Duration::from_secs(60));
     let batches = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
     let counted = batches.clone();
     let _whole = session
