@@ -88,6 +88,11 @@ pub enum PythonError {
     Script(String),
 }
 
+/// The file name support.py's code carries in a traceback.
+const SUPPORT_FILE_NAME: &str = "<ratelab>";
+/// [`SUPPORT_FILE_NAME`] for Python's C API.
+const SUPPORT_FILE_NAME_C: &std::ffi::CStr = c"<ratelab>";
+
 const SUPPORT_SOURCE: &std::ffi::CStr = {
     const BYTES: &[u8] = concat!(include_str!("support.py"), "\0").as_bytes();
     match std::ffi::CStr::from_bytes_with_nul(BYTES) {
@@ -193,7 +198,7 @@ fn load_support() -> Result<Py<PyModule>, String> {
         if !hosted {
             embed::run_startup(py, started_here)?;
         }
-        PyModule::from_code(py, SUPPORT_SOURCE, c"<ratelab>", c"_ratelab_support")
+        PyModule::from_code(py, SUPPORT_SOURCE, SUPPORT_FILE_NAME_C, c"_ratelab_support")
             .and_then(|m| {
                 // What learners' code writes goes to the run's text log (in a host's
                 // interpreter only while a run goes: [`capture_output`]).
@@ -270,10 +275,49 @@ pub fn take_failure_said() -> Option<(PyErr, String)> {
 /// One line for a Python exception raised by code of `script` (see the module docs). The
 /// exception is kept for [`take_failure`].
 pub fn describe(py: Python<'_>, err: &PyErr, script: &str) -> String {
-    let line = described_line(py, err, script);
+    described(py, err, script).1
+}
+
+/// [`describe`], returning the exception it kept as well: `err` from the learner's first
+/// frame ([`from_the_learners_frame`]).
+fn described(py: Python<'_>, err: &PyErr, script: &str) -> (PyErr, String) {
+    let err = from_the_learners_frame(py, err);
+    let line = described_line(py, &err, script);
     *LAST_FAILURE.lock().unwrap_or_else(|e| e.into_inner()) =
         Some((err.clone_ref(py), line.clone()));
-    line
+    (err, line)
+}
+
+/// A copy of `err` whose traceback starts at the first frame that is not ratelab's own
+/// support code (`<ratelab>`, the wrapper that called the learner's function): what a
+/// learner debugs into (`NodeFailed.__cause__`, `%debug`, the lab's log pane) begins at
+/// their own line, as an exception raised by a function they called themselves would.
+/// Frames of ratelab's below theirs (a call they made into ratelab) are kept, and so is the
+/// whole traceback of an exception raised in ratelab's code alone.
+fn from_the_learners_frame(py: Python<'_>, err: &PyErr) -> PyErr {
+    let err = err.clone_ref(py);
+    let mut tb = err.traceback(py);
+    // A traceback is a chain as long as the stack was deep; Python's recursion limit bounds it.
+    while let Some(t) = tb.as_ref() {
+        let ours = t
+            .getattr("tb_frame")
+            .and_then(|f| f.getattr("f_code"))
+            .and_then(|c| c.getattr("co_filename"))
+            .and_then(|n| n.extract::<String>())
+            .is_ok_and(|n| n == SUPPORT_FILE_NAME);
+        if !ours {
+            break;
+        }
+        tb = t
+            .getattr("tb_next")
+            .ok()
+            .and_then(|n| n.cast_into::<pyo3::types::PyTraceback>().ok());
+    }
+    // An exception of ratelab's own (a brain's result refused) keeps its frames.
+    if tb.is_some() {
+        err.set_traceback(py, tb);
+    }
+    err
 }
 
 /// [`describe`]'s line, made printable.
@@ -316,9 +360,9 @@ pub fn log_failures(on: bool) {
 /// in its node's tick, [`ratelab_core::textlog::enter`]); with [`log_failures`] on, also said in
 /// the run's text log with its traceback.
 pub(crate) fn describe_failure(py: Python<'_>, err: &PyErr, script: &str) -> String {
-    let line = describe(py, err, script);
+    let (err, line) = described(py, err, script);
     if FAILURE_ENTRIES.load(std::sync::atomic::Ordering::Relaxed) {
-        ratelab_core::textlog::emit_failure(&line, traceback_of(py, err, script));
+        ratelab_core::textlog::emit_failure(&line, traceback_of(py, &err, script));
     }
     line
 }

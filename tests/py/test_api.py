@@ -282,6 +282,8 @@ def test_a_brain_that_raises_fails_its_node_and_keeps_the_figures():
     frames = traceback.extract_tb(cause.__traceback__)
     assert frames and frames[-1].name == "act", frames
     assert frames[-1].filename == __file__, frames
+    # It starts at the learner's line: no frame of ratelab's wrapper that called `act`.
+    assert [f.name for f in frames] == ["act"], frames
 
 
 def test_a_brain_or_node_class_that_cannot_take_its_argument_is_refused_naming_it():
@@ -363,6 +365,7 @@ def test_a_node_class_that_raises_is_the_cause_with_its_traceback():
     assert isinstance(cause, ValueError) and str(cause) == "no good", repr(cause)
     frames = traceback.extract_tb(cause.__traceback__)
     assert any(f.name == "on_obs" and f.filename == __file__ for f in frames), frames
+    assert frames[0].filename == __file__, frames
 
 
 class _RaisingBalancer:
