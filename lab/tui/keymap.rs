@@ -187,6 +187,11 @@ impl Binding {
     pub fn only_views(&self) -> bool {
         self.keys.iter().all(|(_, m)| m.only_views())
     }
+
+    /// Does this binding pause the run (space)?
+    pub fn pauses(&self) -> bool {
+        self.keys.iter().any(|(_, m)| *m == Msg::TogglePause)
+    }
 }
 
 use KeyCode::{BackTab, Char, Down, Esc, Home, Left, Right, Tab, Up};
@@ -223,7 +228,7 @@ pub const BINDINGS: &[Binding] = &[
             (Char('p'), Msg::SwapBrain),
         ],
         label: "s / S / p",
-        help: "sensor rate down / up / swap brain: scripted ↔ --policy file",
+        help: "sensor rate down / up / brain: scripted ↔ --policy file",
         footer: None,
     },
     Binding {
@@ -283,7 +288,7 @@ pub const BINDINGS: &[Binding] = &[
     Binding {
         keys: &[(Char('b'), Msg::Break), (Char('k'), Msg::Stall)],
         label: "b / k",
-        help: "break: control rate to 5 Hz / stall the selected node 0.5 s",
+        help: "break: control to 5 Hz / stall the selected node 0.5 s",
         footer: Some(("b", "break")),
     },
     Binding {
@@ -322,7 +327,7 @@ pub const BINDINGS: &[Binding] = &[
             (Char(')'), Msg::ChartsWider),
         ],
         label: "< > / ( )",
-        help: "slower / faster (virtual) / charts' window 0.2 s … whole run",
+        help: "slower / faster (virtual) / chart window 0.2 s … whole run",
         footer: None,
     },
     Binding {
@@ -341,7 +346,7 @@ pub const BINDINGS: &[Binding] = &[
     Binding {
         keys: &[(Esc, Msg::Back), (Char('q'), Msg::Quit)],
         label: "Esc / q / Ctrl-C",
-        help: "close help, selection, filter / quit / stop a hang, or quit",
+        help: "close help, selection, filter / quit / stop a hang or quit",
         footer: Some(("q", "quit")),
     },
 ];
@@ -507,6 +512,26 @@ mod tests {
                 assert!(!seen.contains(code), "{code:?} bound twice");
                 seen.push(*code);
             }
+        }
+    }
+
+    /// Every row of the key help fits the 78 columns inside its box at 80 columns: a margin,
+    /// the label column, two spaces, the text (`view::help_row`), none cut or touching a
+    /// border.
+    #[test]
+    fn every_help_row_fits_eighty_columns() {
+        let w = crate::tui::view::HELP_LABEL_CHARS;
+        let rows = BINDINGS
+            .iter()
+            .map(|b| (b.label, b.help))
+            .chain(HELP_NOTES.iter().copied());
+        for (label, text) in rows {
+            assert!(
+                label.chars().count() <= w,
+                "label {label:?} is wider than {w}"
+            );
+            let row = 1 + w + 2 + text.chars().count();
+            assert!(row <= 78, "{label:?}: {row} columns: {text:?}");
         }
     }
 

@@ -2483,6 +2483,29 @@ mod tests {
         assert_eq!(sent, vec![phase("policy", 10.0), phase("policy", 10.0)]);
     }
 
+    /// The footer offers a pause under the virtual clock only: real time does not stop
+    /// (space there reviews a run that ended, as the help says).
+    #[test]
+    fn the_footer_offers_a_pause_only_under_the_virtual_clock() {
+        let footer = |app: &App| {
+            render(app, 120, 40)
+                .lines()
+                .last()
+                .unwrap_or("")
+                .to_string()
+        };
+        let (app, _rx) = app_after(virtual_cfg(50.0, 1), false);
+        assert!(footer(&app).contains("␣ pause"), "{}", footer(&app));
+        let mut cfg = virtual_cfg(50.0, 1);
+        cfg.clock = ClockKind::Real;
+        let (app, _rx) = app_after(cfg, false);
+        let real = footer(&app);
+        assert!(
+            !real.contains("pause") && real.contains("c clock"),
+            "{real}"
+        );
+    }
+
     /// `d` on the selected topic (/action, the actuator's input, as in exercise ex5) steps
     /// its deadline through none, 25, 30 (ex5's), 50, 100 and 200 ms, then off again.
     #[test]

@@ -1101,9 +1101,12 @@ fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
             },
             None => vec![" ".into()],
         };
+        // Under the real clock time does not stop: space only reviews a run that ended
+        // (the help says so), so the footer does not offer a pause.
         let shown = BINDINGS
             .iter()
-            .filter(|b| v.attached.is_none() || b.only_views());
+            .filter(|b| v.attached.is_none() || b.only_views())
+            .filter(|b| v.clock != "real" || !b.pauses());
         for (keys, word) in shown.filter_map(|b| b.footer) {
             spans.push(format!("{keys} ").bold());
             spans.push(format!("{word} ").into());
@@ -1120,20 +1123,33 @@ fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
     Paragraph::new(lines).render(area, buf);
 }
 
+/// The widest label of the key help's left column, characters ([`help_row`]).
+pub(crate) const HELP_LABEL_CHARS: usize = 16;
+
+/// One row of the key help: a margin, `label` bold and right-aligned in a column of
+/// [`HELP_LABEL_CHARS`], two spaces, `text`; neither touching the box at 80 columns (a test
+/// holds every row to its 78 inner columns).
+fn help_row<'a>(label: &str, text: &'a str) -> Line<'a> {
+    Line::from(vec![
+        format!(" {label:>w$}  ", w = HELP_LABEL_CHARS).bold(),
+        text.into(),
+    ])
+}
+
 /// The key help over the lab; `attached`: only the keys that act in a lab that watches a
 /// graph across processes (the others would be refused).
 fn render_help(area: Rect, buf: &mut Buffer, attached: bool) {
     let mut lines: Vec<Line> = BINDINGS
         .iter()
         .filter(|b| !attached || b.only_views())
-        .map(|b| Line::from(vec![format!("{:>16}  ", b.label).bold(), b.help.into()]))
+        .map(|b| help_row(b.label, b.help))
         .collect();
     let notes: Vec<Line> = HELP_NOTES
         .iter()
         // Attached, the ladders, the fall's keys and reliable delivery's losses do not apply;
         // the wire's note does, and only there.
         .filter(|(k, _)| attached == k.starts_with("wire"))
-        .map(|(k, d)| Line::from(vec![format!("{k:>16}  ").bold(), (*d).into()]))
+        .map(|(k, d)| help_row(k, d))
         .collect();
     // A blank line between keys and notes where it fits with the footer's row left free
     // (at 80×24 every line is needed).

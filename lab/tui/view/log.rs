@@ -143,6 +143,11 @@ fn pane_rows(l: &LogView, width: usize, rows: usize) -> Vec<(String, bool, bool)
 
 /// The log pane in `area`: its entries wrapped, the selected one at the bottom (bold while
 /// scrolled back), and in its title what the keys do.
+/// `1 line`, `40 lines`: the pane's count of entries as its title says it.
+fn lines(n: usize) -> String {
+    ratelab::metrics::counted(n as u64, "line")
+}
+
 pub fn render_log(l: &LogView, area: Rect, buf: &mut Buffer) {
     let whole = if l.entries.last().is_some_and(|e| !e.traceback.is_empty()) {
         " · ↵ traceback"
@@ -151,11 +156,13 @@ pub fn render_log(l: &LogView, area: Rect, buf: &mut Buffer) {
     };
     let title = if l.back > 0 {
         format!(
-            " log: {} ({} lines, {} back) · PgDn newer{whole} · v hides ",
-            l.whose, l.total, l.back
+            " log: {} ({}, {} back) · PgDn newer{whole} · v hides ",
+            l.whose,
+            lines(l.total),
+            l.back
         )
     } else {
-        format!(" log: {} ({} lines){whole} · v hides ", l.whose, l.total)
+        format!(" log: {} ({}){whole} · v hides ", l.whose, lines(l.total))
     };
     let block = Block::bordered().title(title);
     let inner = block.inner(area);

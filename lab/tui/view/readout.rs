@@ -196,17 +196,58 @@ fn fit<const N: usize>(forms: [String; N], room: usize) -> String {
     let mut last = String::new();
     for f in forms {
         if Span::raw(f.as_str()).width() <= room {
-            return f;
+            return no_negative_zero(&f);
         }
         last = f;
     }
-    last
+    no_negative_zero(&last)
+}
+
+/// `line` with every signed number that reads as zero written `+0.000`, not `-0.000` (a
+/// value such as -0.00001 rad printed to four places): the readout's signs say a direction,
+/// and a zero has none.
+fn no_negative_zero(line: &str) -> String {
+    let chars: Vec<char> = line.chars().collect();
+    let mut out = String::with_capacity(line.len());
+    for (i, &c) in chars.iter().enumerate() {
+        if c == '-' {
+            let number: Vec<char> = chars[i + 1..]
+                .iter()
+                .copied()
+                .take_while(|d| d.is_ascii_digit() || *d == '.')
+                .collect();
+            if number.first() == Some(&'0') && number.iter().all(|d| *d == '0' || *d == '.') {
+                out.push('+');
+                continue;
+            }
+        }
+        out.push(c);
+    }
+    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use ratelab::runlog::TopicCounters;
+
+    #[test]
+    fn a_zero_reads_plus_zero_and_other_numbers_keep_their_sign() {
+        assert_eq!(
+            no_negative_zero("t=1.000 s · θ -0.0000 rad · θ̇ -0.045 rad/s"),
+            "t=1.000 s · θ +0.0000 rad · θ̇ -0.045 rad/s"
+        );
+        assert_eq!(no_negative_zero("error -0.0 mrad/s"), "error +0.0 mrad/s");
+        assert_eq!(no_negative_zero("F -0.01 N · -3"), "F -0.01 N · -3");
+        assert_eq!(no_negative_zero("a - b -0"), "a - b +0");
+        let mut r = Readout::at(Nanos(2_340_000_000), &tick(), Some(obs()));
+        r.theta_rad = -0.000_01;
+        assert!(
+            r.plant_line(80).contains("θ +0.0000 rad"),
+            "{}",
+            r.plant_line(80)
+        );
+    }
 
     /// The actuator's tick at 2.34 s: θ 0.0123 rad, θ̇ −0.045 rad/s, action 0.32 (3.2 N),
     /// holding a command published at 2.30 s.
