@@ -531,13 +531,14 @@ impl Table {
         };
         let mut s = String::new();
         let _ = writeln!(s, "{}", self.head);
-        let _ = writeln!(s, "{}", node_heading());
+        // Columns are padded to line up; a row ends at its last character.
+        let _ = writeln!(s, "{}", node_heading().trim_end());
         for r in nodes {
-            let _ = writeln!(s, "{}", r.line);
+            let _ = writeln!(s, "{}", r.line.trim_end());
         }
-        let _ = writeln!(s, "\n{}", topic_heading());
+        let _ = writeln!(s, "\n{}", topic_heading().trim_end());
         for r in topics {
-            let _ = writeln!(s, "{}", r.line);
+            let _ = writeln!(s, "{}", r.line.trim_end());
         }
         if let Some(f) = footer {
             let _ = writeln!(s, "{f}");
@@ -581,11 +582,13 @@ fn build_table(
         .filter(|(g, p)| !seen.contains_key(&format!("{g}/{}", p.name)))
         .collect();
     let unknown = Known::new(None);
-    let head = format!(
-        "ratelab top: {} process(es), run time {:.2} s",
-        seen.len() + unheard.len(),
-        t as f64 / 1e9
-    );
+    let head = match seen.len() + unheard.len() {
+        1 => format!("ratelab top: 1 process, run time {:.2} s", t as f64 / 1e9),
+        n => format!(
+            "ratelab top: {n} processes, run time {:.2} s",
+            t as f64 / 1e9
+        ),
+    };
     let mut nodes = unheard_node_rows(&unheard, &alive_set);
     let mut wire: BTreeMap<String, (f64, f64)> = BTreeMap::new();
     let mut topics: Vec<TopicRow> = Vec::new();

@@ -168,7 +168,7 @@ fn a_watcher_never_breaks_a_large_launch_under_the_virtual_clock() {
             .arg(&creds)
             .output()
             .unwrap();
-        watched += usize::from(top.status.success() && text(&top.stdout).contains("8 process(es)"));
+        watched += usize::from(top.status.success() && text(&top.stdout).contains("8 processes"));
         std::thread::sleep(Duration::from_millis(200));
     }
     let status = exit_within(&mut launch, 60);
