@@ -95,7 +95,7 @@ pub fn run_headless(a: &RunArgs, stop: StopFlag) -> anyhow::Result<RunReport> {
     }
     if let Some(r) = &done.recording {
         println!("[ratelab] recording: {}", r.path().display());
-        println!("[ratelab] open it with: rerun {}", r.path().display());
+        println!("[ratelab] {}", ratelab::recording::open_hint(r.path()));
     }
     if let Some(Err(e)) = done.report.ros2.as_ref().and_then(|r| r.bagged.as_ref()) {
         // After the summary and the other outputs: a bag that is not whole is an error.
@@ -218,8 +218,16 @@ impl RunObserver for ProgressObserver {
     }
 }
 
-/// The chapter's summary, one `[ratelab]` line each, on stdout.
+/// The chapter's summary, one `[ratelab]` line each, on stdout: its figures
+/// ([`print_figures`]), then how the run ended where it did not run its course
+/// ([`print_end`]).
 pub fn print_summary(report: &RunReport) {
+    print_figures(report);
+    print_end(report);
+}
+
+/// The summary's figures, one `[ratelab]` line each, on stdout.
+pub fn print_figures(report: &RunReport) {
     let mut out = std::io::stdout().lock();
     for line in report
         .metrics
@@ -227,6 +235,12 @@ pub fn print_summary(report: &RunReport) {
     {
         let _ = writeln!(out, "[ratelab] {line}");
     }
+}
+
+/// The summary's last line where the run did not run its course: `interrupted at t=…`, or
+/// the node that failed. Said after every figure (a launch's wire and lockstep lines too).
+pub fn print_end(report: &RunReport) {
+    let mut out = std::io::stdout().lock();
     match &report.end.reason {
         EndReason::Interrupted => {
             let _ = writeln!(

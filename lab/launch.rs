@@ -140,7 +140,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         wall: report.wall,
         ros2: None,
     };
-    headless::print_summary(&report);
+    headless::print_figures(&report);
     for w in &wire {
         println!("[ratelab] {}", wire_line(w));
     }
@@ -150,6 +150,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
             l.ticks, l.instants, l.us_per_instant
         );
     }
+    headless::print_end(&report);
     if let Some(dir) = &run.out {
         let json = serde_json::to_string_pretty(&report.metrics)? + "\n";
         ratelab::output::write_file(&dir.join("metrics.json"), run.force, json.as_bytes())?;
@@ -157,7 +158,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
     }
     if let Some(r) = &recording {
         println!("[ratelab] recording: {}", r.path().display());
-        println!("[ratelab] open it with: rerun {}", r.path().display());
+        println!("[ratelab] {}", ratelab::recording::open_hint(r.path()));
     }
     anyhow::ensure!(
         missing.is_empty(),
@@ -310,7 +311,7 @@ fn wire_line(w: &ratelab::distributed::wire::WireLink) -> String {
         (n, d) => format!(" | {n} read in place from shared memory | {d} as their node drew them"),
     };
     format!(
-        "wire {} into '{}': {} samples{since}, p50 {} µs | p99 {} µs | max {} µs{in_place}",
+        "wire {} into '{}': {} samples{since}, p50 {:.1} µs | p99 {:.1} µs | max {:.1} µs{in_place}",
         w.topic, w.process, w.samples, w.p50_us, w.p99_us, w.max_us
     )
 }
