@@ -346,11 +346,7 @@ fn grouped_bus_tabs(
         };
         let views: Vec<ViewSpec> = [
             bus("published", "bus: published (total)").map(totals),
-            bus(
-                "dropped",
-                "bus: dropped (total): older messages a full queue let go",
-            )
-            .map(totals),
+            bus("dropped", "bus: dropped by a full queue (total)").map(totals),
             bus("msg_per_s", "bus: msg/s (1 s window)")
                 .map(|v| legend_at(v, bpc::Corner2D::RightBottom)),
         ]
@@ -522,10 +518,7 @@ fn bus_views(shape: &GraphShape, extents: Option<&Extents>) -> [ViewSpec; 3] {
     );
     // A drop is a message a full queue let go for a newer one: by design where a topic
     // of depth 1 is read slower than it is written (the freshest wins), not an alarm.
-    let dropped = totals(bus(
-        "dropped",
-        "bus: dropped (total): older messages a full queue let go",
-    ));
+    let dropped = totals(bus("dropped", "bus: dropped by a full queue (total)"));
     [published, msg_per_s, dropped]
 }
 
@@ -658,10 +651,7 @@ fn world_view() -> ViewSpec {
 /// of topics ([`super::groups`]).
 fn graph_view(shape: &GraphShape, groups: Option<&super::groups::Groups>) -> ViewSpec {
     let (bounds, title) = match groups {
-        None => (
-            graph_positions(shape).1,
-            "node graph: node → /topic → node, coloured as in the plots",
-        ),
+        None => (graph_positions(shape).1, "node graph: node → /topic → node"),
         Some(groups) => (
             super::grouped::graph_positions(shape, groups).1,
             "node graph by group: nodes ×count → /topics ×count → nodes",

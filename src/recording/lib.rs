@@ -125,6 +125,22 @@ mod legend;
 mod live;
 pub use files::timeline_name;
 pub use live::viewer_on_path;
+
+/// How a user gets the stock rerun viewer that opens ratelab's recordings: the version
+/// `pip install rerun-sdk` gives today (0.41; docs/recordings.md says why ratelab writes with
+/// the crate 0.36.3, which that viewer reads).
+pub const VIEWER_INSTALL: &str = "pip install rerun-sdk==0.41.0";
+
+/// The line that tells a user how to open the recording at `path`: `open it with: rerun
+/// PATH`, and where no `rerun` is on PATH, how to get one ([`VIEWER_INSTALL`]).
+pub fn open_hint(path: &Path) -> String {
+    let open = format!("open it with: rerun {}", path.display());
+    if viewer_on_path() {
+        open
+    } else {
+        format!("{open} (no rerun on PATH: {VIEWER_INSTALL})")
+    }
+}
 mod observer;
 mod settings;
 mod shape;
@@ -656,7 +672,7 @@ impl Recording {
         let live = opts.spawn && viewer_on_path();
         if opts.spawn && !live {
             notice = Some(
-                "no rerun viewer on PATH: recording to the file only (install one with `cargo install rerun-cli --locked --version 0.36.3` or `pip install rerun-sdk==0.36.3`)".to_string(),
+                format!("no rerun viewer on PATH: recording to the file only (install one: {VIEWER_INSTALL}, or cargo install rerun-cli --locked --version 0.41.0)"),
             );
         }
         let rec = if live {

@@ -306,11 +306,33 @@ fn headless_record_prints_where_and_how_to_open() {
         .output()
         .unwrap();
     assert!(o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("no rerun viewer on PATH"));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("no rerun viewer on PATH"), "{err}");
+    // Both lines name the viewer a user gets today, not an older one.
+    let install = "pip install rerun-sdk==0.41.0";
+    assert!(err.contains(install), "{err}");
+    let out = String::from_utf8_lossy(&o.stdout);
+    let hint = format!("open it with: rerun recordings/virtual-control50-q1-seed0-3.rrd (no rerun on PATH: {install}");
+    assert!(out.contains(&hint), "{out}");
     assert!(dir
         .path()
         .join("recordings/virtual-control50-q1-seed0-3.rrd")
         .is_file());
+    // With a `rerun` on PATH, the line is the command alone.
+    let bin = dir.path().join("bin");
+    std::fs::create_dir(&bin).unwrap();
+    std::fs::write(bin.join("rerun"), "").unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--smoke", "--record", "r.rrd"])
+        .current_dir(dir.path())
+        .env("PATH", &bin)
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("[ratelab] open it with: rerun r.rrd\n"),
+        "{out}"
+    );
 }
 
 #[test]
