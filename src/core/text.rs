@@ -79,6 +79,17 @@ pub fn number(x: f64) -> String {
     }
 }
 
+/// `x` to `places` decimals with its sign, `+` for a value that reads as zero: `+0.0`, never
+/// the `-0.0` Rust writes for -0.04 (a sign on a readout says a direction; a zero has none).
+pub fn signed(x: f64, places: usize) -> String {
+    let text = format!("{x:+.places$}");
+    if text.starts_with('-') && text[1..].chars().all(|c| c == '0' || c == '.') {
+        format!("+{}", &text[1..])
+    } else {
+        text
+    }
+}
+
 /// Does `text` hold a control character (what [`printable`] would write out)?
 pub fn has_control(text: &str) -> bool {
     text.chars().any(char::is_control)
@@ -115,6 +126,18 @@ pub fn listed_at_most<'a>(names: impl IntoIterator<Item = &'a str>, most: usize)
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn a_signed_zero_reads_plus_zero() {
+        assert_eq!(signed(-0.04, 1), "+0.0");
+        assert_eq!(signed(-0.0, 2), "+0.00");
+        assert_eq!(signed(0.0, 1), "+0.0");
+        assert_eq!(signed(-0.05, 1), "-0.1");
+        assert_eq!(signed(3.25, 2), "+3.25");
+        assert_eq!(signed(-12.0, 0), "-12");
+        assert_eq!(signed(f64::NAN, 1), "NaN");
+    }
+
     use super::*;
 
     #[test]

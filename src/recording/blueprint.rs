@@ -282,7 +282,7 @@ fn concern_tabs(
         let doc = ViewSpec::new(
             "groups",
             "TextDocument",
-            "groups: the graph's nodes and topics by group, and where their own series are",
+            "groups: nodes, topics, their series",
         )
         .contents([format!("/{}", super::groups::DOC_ENTITY)]);
         tabs.push(("groups".into(), Item::View(doc)));
@@ -581,7 +581,7 @@ fn executor_views(shape: &GraphShape, extents: Option<&Extents>) -> [ViewSpec; 3
     let (lo, hi) = padded(first, last + LANE_BUSY);
     let timeline = plot(
         "executor-timeline",
-        &format!("executor timeline: a lane per node, raised while its tick holds a thread{of}"),
+        &format!("executor timeline: up while a tick runs{of}"),
         each("executor_lane"),
         None,
         None,
@@ -589,14 +589,14 @@ fn executor_views(shape: &GraphShape, extents: Option<&Extents>) -> [ViewSpec; 3
     .y_range(lo, hi);
     let response = plot(
         "response",
-        &format!("response time (ms): a tick's release → its outputs published{of}"),
+        &format!("response time (ms): release → publish{of}"),
         each("response_ms"),
         extents.map(|_| (0.0, 0.0)),
         extents,
     );
     let skipped = totals(plot(
         "skipped",
-        &format!("skipped ticks (total): periods a node's timer let pass, its thread held{of}"),
+        &format!("skipped ticks (total): thread busy{of}"),
         each("skipped_ticks"),
         extents.map(|_| (0.0, 1.0)),
         extents,
@@ -615,7 +615,7 @@ fn wire_view(shape: &GraphShape, extents: Option<&Extents>) -> Option<ViewSpec> 
     (!wire.is_empty()).then(|| {
         plot(
             "wire",
-            "over the wire (µs): each crossing topic's p50, p99 so far",
+            "over the wire (µs): p50, p99 so far",
             wire,
             extents.map(|_| (0.0, 0.0)),
             extents,
@@ -654,7 +654,7 @@ fn graph_view(shape: &GraphShape, groups: Option<&super::groups::Groups>) -> Vie
         None => (graph_positions(shape).1, "node graph: node → /topic → node"),
         Some(groups) => (
             super::grouped::graph_positions(shape, groups).1,
-            "node graph by group: nodes ×count → /topics ×count → nodes",
+            "node graph by group (×count)",
         ),
     };
     ViewSpec::new("graph", "Graph", title)

@@ -366,7 +366,10 @@ mod tests {
                     graph: graph.clone(),
                     ..RunConfig::default()
                 };
-                let root = crate::blueprint::layout_for(&shape, &cfg, None);
+                let mut root = crate::blueprint::layout_for(&shape, &cfg, None);
+                // Every view's title reads whole at 1280×720.
+                let cut = crate::legend::cut_titles(&mut root);
+                assert!(cut.is_empty(), "{n} nodes, {clock:?}: cut titles {cut:?}");
                 let views = root.views();
                 for v in &views {
                     let (title, queries) = v.title_and_queries();

@@ -422,6 +422,33 @@ pub(super) fn place_legends(root: &mut Item, seen: &Seen, extents: &Extents, x: 
     });
 }
 
+/// A character of a view's title at 1280×720, px (on average: the stock viewer drew 45
+/// characters of a title in 262 px).
+#[cfg(test)]
+const TITLE_CHAR_PX: f32 = 5.9;
+/// What a view's title bar holds beside its title at 1280×720, px: the view kind's icon on
+/// the left; on the right its help, visibility and maximize buttons, and the arrow the
+/// viewer adds to a title it cuts.
+#[cfg(test)]
+const TITLE_BAR_ICONS_PX: f32 = 136.0;
+
+/// The views of the layout `root` whose title is cut at 1280×720, each `(title, the
+/// title's width, the view's, px)`. A title's detail after ` · ` (how many of a large
+/// graph's nodes a plot shows, and which) may be cut; its head may not.
+#[cfg(test)]
+pub(super) fn cut_titles(root: &mut Item) -> Vec<(String, f32, f32)> {
+    let mut cut = Vec::new();
+    walk(root, (VIEWS_W_PX, VIEWS_H_PX), &mut |view, (w, _)| {
+        let title = view.title_and_queries().0;
+        let head = title.split(" · ").next().unwrap_or(title);
+        let needs = head.chars().count() as f32 * TITLE_CHAR_PX + TITLE_BAR_ICONS_PX;
+        if needs > w {
+            cut.push((head.to_string(), needs, w));
+        }
+    });
+    cut
+}
+
 /// Call `f` on every view of `item` with its size (width, height, px) in a `px` space,
 /// as the viewer lays the shares out (a tab container's bar of tabs taken off its
 /// children's height; each view's title bar is the caller's).

@@ -1369,7 +1369,24 @@ mod tests {
                 clock,
                 ..RunConfig::default()
             };
-            let root = layout_for(&s, &cfg, None);
+            let mut root = layout_for(&s, &cfg, None);
+            // Every view's title reads whole at 1280×720, across processes too (the wire's).
+            let cut = legend::cut_titles(&mut root);
+            assert!(cut.is_empty(), "{clock:?}: cut titles {cut:?}");
+            let mut placed = s.clone();
+            for (n, p) in placed.nodes.iter_mut().zip(["robot", "policy", "robot"]) {
+                n.process = Some(p.to_string());
+            }
+            let mut across = layout_for(&placed, &cfg, None);
+            assert!(across
+                .views()
+                .iter()
+                .any(|v| v.title_and_queries().0.starts_with("over the wire")));
+            let cut = legend::cut_titles(&mut across);
+            assert!(
+                cut.is_empty(),
+                "{clock:?}, across processes: cut titles {cut:?}"
+            );
             let views = root.views();
             for v in &views {
                 let (title, queries) = v.title_and_queries();

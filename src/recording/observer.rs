@@ -575,7 +575,7 @@ fn world_rows(buf: &mut ChunkBuffer, time: &TimePoint, s: &StepRecord, force: f6
             .with_origins([[0.0, -0.06, 0.0]])
             .with_colors([rgb(FORCE_COLOR)])
             .with_radii([0.012])
-            .with_labels([format!("{force:+.1} N")]),
+            .with_labels([format!("{} N", ratelab_core::text::signed(force, 1))]),
     );
 }
 
