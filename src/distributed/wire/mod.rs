@@ -387,6 +387,28 @@ mod tests {
         let back = decode_json::<Setup>(&bytes).unwrap();
         assert_eq!(back.graph_toml, setup.graph_toml);
         assert_eq!(back.policy, "scripted\\u{1b}");
+        // A message of tick reports (postcard): its process and failure written out where
+        // they hold a control character, kept as they are where not.
+        let report = |process: &str, failed: Option<&str>| Ticked {
+            process: process.into(),
+            index: 0,
+            node: 0,
+            t_ns: 0,
+            stop: false,
+            published: Vec::new(),
+            failed: failed.map(Into::into),
+            publish: false,
+            compute_ns: 0,
+        };
+        let sent = [
+            report("robot\u{1b}[2J", Some("boom\n")),
+            report("policy é", Some("ValueError: x")),
+            report("robot", None),
+        ];
+        let back = decode_reports(&encode_reports(&sent)).unwrap();
+        assert_eq!(back[0].process, "robot\\u{1b}[2J");
+        assert_eq!(back[0].failed.as_deref(), Some("boom\\n"));
+        assert_eq!(back[1..], sent[1..]);
     }
 
     #[test]

@@ -427,11 +427,16 @@ pub(super) fn decode_report_list(bytes: &[u8], most: usize) -> Result<Vec<Ticked
         ));
     }
     for t in &mut ts {
-        t.process = ratelab_core::text::printable(&t.process).into_owned();
-        t.failed = t
-            .failed
-            .as_deref()
-            .map(|f| ratelab_core::text::printable(f).into_owned());
+        // Replaced only where a control character was written out: a report's text is
+        // printable as sent, and every process decodes every other's reports on its turn's path.
+        if let std::borrow::Cow::Owned(p) = ratelab_core::text::printable(&t.process) {
+            t.process = p;
+        }
+        if let Some(std::borrow::Cow::Owned(f)) =
+            t.failed.as_deref().map(ratelab_core::text::printable)
+        {
+            t.failed = Some(f);
+        }
     }
     Ok(ts)
 }
