@@ -1311,6 +1311,15 @@ mod tests {
         assert_eq!(rows(&a), rows(&b));
         assert_ne!(rows(&a), rows(&before), "8 Hz falls between 5 and 8 s");
         assert!(a.contains("back at t=5.000 s"), "{a}");
+        // A step from there: the notice names where the run is now, not where it was said.
+        let next = report.trace.iter().find(|s| s.t > at).unwrap();
+        back.on_telemetry(Telemetry::Step(Box::new(next.clone())));
+        let stepped = render(&back, 120, 40);
+        let now = format!("back at t={:.3} s", next.t.as_secs_f64());
+        assert!(
+            stepped.contains(&now) && !stepped.contains("t=5.000 s"),
+            "{stepped}"
+        );
     }
 
     /// Space on a real-clock run that has ended reviews it: ← and → show the run as it was

@@ -327,6 +327,8 @@ impl App {
             ros2_domain: _,
             show_ros2: _,
             help: _,
+            // Said by the seek back that folds the journal, after it.
+            back_notice: _,
             confirm_quit: _,
             typing: _,
             attached: _,

@@ -121,9 +121,28 @@ impl App {
         // Folded again, the journal told of it: not the branch's (above).
         self.faults.injected.retain(|f| f.at <= at);
         self.now = at;
-        self.say(format!(
-            "back at t={:.3} s: a change or space branches the run here",
-            at.as_secs_f64()
-        ));
+        let notice = back_notice(at);
+        self.say(notice.clone());
+        self.back_notice = Some((at, notice));
     }
+
+    /// The message the footer shows: the last said, or, while that is a seek back's notice
+    /// and the run has moved on since (a step, a seek forward), the notice at the run time
+    /// the run is now at (not the one it was said at).
+    pub(super) fn shown_message(&self) -> Option<String> {
+        match (&self.message, &self.back_notice) {
+            (Some(m), Some((at, said))) if m == said && *at != self.now => {
+                Some(back_notice(self.now))
+            }
+            _ => self.message.clone(),
+        }
+    }
+}
+
+/// What the lab says after a seek back to `at`.
+fn back_notice(at: Nanos) -> String {
+    format!(
+        "back at t={:.3} s: a change or space branches the run here",
+        at.as_secs_f64()
+    )
 }

@@ -531,7 +531,7 @@ impl App {
             segment: self.segment_view(),
             help: self.help,
             typing: self.typing.clone(),
-            message: self.message.clone(),
+            message: self.shown_message(),
             message_fresh: self.message_at.is_some_and(|at| at.elapsed() < FRESH),
             attached: self.attached.clone(),
             endpoint: self.endpoint.clone(),
