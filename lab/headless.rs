@@ -43,6 +43,18 @@ pub fn config_from_args(a: &RunArgs) -> anyhow::Result<RunConfig> {
     Ok(cfg)
 }
 
+/// Refuse `--trace-every N` (N > 1) where no trace.csv is written (no `--out`): accepted, it
+/// would do nothing.
+///
+/// # Errors
+/// One line saying what to add.
+pub fn check_trace_every(a: &RunArgs) -> anyhow::Result<()> {
+    if a.trace_every > 1 && a.out.is_none() {
+        anyhow::bail!("--trace-every thins trace.csv, which only --out writes: add --out DIR");
+    }
+    Ok(())
+}
+
 /// Warn on stderr of each injected fault (`--stall`, `--kill`) that starts after `cfg`'s
 /// run ends, so does nothing ([`late_fault_warnings`]). Call it once the run's duration is
 /// final (the lab and a launch on a terminal run until quit, with no end to be after).

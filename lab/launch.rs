@@ -38,7 +38,11 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
                 "--listen, --no-spawn, --export-credentials, --kill-process and --star need --processes"
             );
         }
+        headless::check_trace_every(&run)?;
         return headless::run_headless(&run, stop).map(|_| ());
+    }
+    if run.trace_every > 1 {
+        anyhow::bail!("--trace-every thins trace.csv, which a launch across processes does not write (its --out holds metrics.json)");
     }
     if run.bag.is_some() {
         anyhow::bail!("--bag writes a bag of a run in one process (run --ros2): a launch across processes does not write one yet");

@@ -37,12 +37,20 @@ fn headless(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
         // Accepted silently, it wrote nothing: the log is of a lab's keys.
         anyhow::bail!("--session is the lab's log of the keys pressed in it; a headless run takes none (run `ratelab lab --session FILE`, or give the changes at the start)");
     }
+    headless::check_trace_every(args)?;
     headless::run_headless(args, stop).map(|_| ())
 }
 
 /// Open the terminal lab with the run flags.
 fn lab(args: &cli::RunArgs, stop: StopFlag) -> anyhow::Result<()> {
     use ratelab::session::{SessionSettings, Speed, UNBOUNDED};
+    // Accepted, they would write nothing: the lab keeps its runs by --record and --session.
+    if args.out.is_some() {
+        anyhow::bail!("--out writes one headless run's files: the lab keeps its runs with --record and --session (run `ratelab run --out DIR` for metrics.json and trace.csv)");
+    }
+    if args.trace_every > 1 {
+        anyhow::bail!("--trace-every thins trace.csv, which the lab does not write (run `ratelab run --out DIR --trace-every N`)");
+    }
     let mut cfg = headless::config_from_args(args)?;
     if args.duration.is_none() && !args.smoke {
         cfg.duration = UNBOUNDED;

@@ -84,6 +84,50 @@ fn a_headless_run_refuses_the_lab_s_session_log_it_would_not_write() {
 }
 
 #[test]
+fn flags_that_would_write_nothing_are_refused_not_ignored() {
+    // trace.csv is written by --out alone, and never by the lab or a launch across processes.
+    assert_usage_error(
+        &["run", "--smoke", "--trace-every", "2"],
+        "error: --trace-every thins trace.csv, which only --out writes: add --out DIR",
+    );
+    assert_usage_error(
+        &["launch", "--smoke", "--trace-every", "2"],
+        "which only --out writes",
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o");
+    let out = out.to_str().unwrap();
+    assert_usage_error(
+        &[
+            "launch",
+            "--processes",
+            "--headless",
+            "--smoke",
+            "--out",
+            out,
+            "--trace-every",
+            "2",
+        ],
+        "error: --trace-every thins trace.csv, which a launch across processes does not write",
+    );
+    // The lab refuses before its screen opens (here without a terminal, as in a pipe).
+    assert_usage_error(
+        &["lab", "--out", out],
+        "error: --out writes one headless run's files",
+    );
+    assert_usage_error(
+        &["lab", "--trace-every", "3"],
+        "error: --trace-every thins trace.csv, which the lab does not write",
+    );
+    assert!(!Path::new(out).exists());
+    // With --out it thins the file.
+    let o = ratelab(&["run", "--smoke", "--out", out, "--trace-every", "10"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let rows = std::fs::read_to_string(Path::new(out).join("trace.csv")).unwrap();
+    assert!(rows.lines().count() < 20, "{} rows", rows.lines().count());
+}
+
+#[test]
 fn an_exercise_without_its_folder_says_where_to_run_it_or_what_to_give() {
     assert_usage_error(
         &["exercise", "ex1", "--dir", "/nonexistent/exercises"],
