@@ -521,9 +521,11 @@ impl Table {
                     &self.nodes[window(n, for_nodes)],
                     &self.topics[window(t, for_topics)],
                     Some(format!(
-                        "page {}/{pages} · sorted by {} · {n} nodes, {t} topics · PgDn/PgUp s q",
+                        "page {}/{pages} · sorted by {} · {}, {} · PgDn/PgUp s q",
                         index + 1,
-                        by.word()
+                        by.word(),
+                        ratelab::metrics::counted(n as u64, "node"),
+                        ratelab::metrics::counted(t as u64, "topic")
                     )),
                     index,
                 )

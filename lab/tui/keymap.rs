@@ -516,8 +516,7 @@ mod tests {
     }
 
     /// Every row of the key help fits the 78 columns inside its box at 80 columns: a margin,
-    /// the label column, two spaces, the text (`view::help_row`), none cut or touching a
-    /// border.
+    /// the label column, two spaces, the text (`view::help_row`), none cut.
     #[test]
     fn every_help_row_fits_eighty_columns() {
         let w = crate::tui::view::HELP_LABEL_CHARS;

@@ -1310,7 +1310,22 @@ mod tests {
         );
         assert_eq!(rows(&a), rows(&b));
         assert_ne!(rows(&a), rows(&before), "8 Hz falls between 5 and 8 s");
-        assert!(a.contains("back at t=5.000 s"), "{a}");
+        // The engine paused there (a seek is made paused): the notice says where.
+        let status = |paused: bool| Telemetry::Status {
+            now: at,
+            paused,
+            speed: Speed::Times(1.0),
+            rates: vec![50.0, 8.0, 50.0],
+            depths: vec![1, 1],
+            qos: Vec::new(),
+            alive: Vec::new(),
+            policy: "scripted".into(),
+            exec: None,
+            topics: None,
+        };
+        back.on_telemetry(status(true));
+        let paused = render(&back, 120, 40);
+        assert!(paused.contains("back at t=5.000 s"), "{paused}");
         // A step from there: the notice names where the run is now, not where it was said.
         let next = report.trace.iter().find(|s| s.t > at).unwrap();
         back.on_telemetry(Telemetry::Step(Box::new(next.clone())));
@@ -1320,6 +1335,10 @@ mod tests {
             stepped.contains(&now) && !stepped.contains("t=5.000 s"),
             "{stepped}"
         );
+        // Resumed (space), the run goes on: the notice is not said of every instant after.
+        back.on_telemetry(status(false));
+        let resumed = render(&back, 120, 40);
+        assert!(!resumed.contains("back at t="), "{resumed}");
     }
 
     /// Space on a real-clock run that has ended reviews it: ← and → show the run as it was
@@ -1520,9 +1539,9 @@ mod tests {
             .unwrap();
         let p = rec.estimate.as_ref().unwrap();
         let pair = format!(
-            "θ̇ {:+.3} · est {:+.3} rad/s",
-            p.truth[POLE_ANGVEL],
-            p.estimate.unwrap()[POLE_ANGVEL]
+            "θ̇ {} · est {} rad/s",
+            ratelab::text::signed(p.truth[POLE_ANGVEL], 3),
+            ratelab::text::signed(p.estimate.unwrap()[POLE_ANGVEL], 3)
         );
         let text = render(&app, 120, 40);
         assert!(text.contains(&pair), "{text}");

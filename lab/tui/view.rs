@@ -1127,8 +1127,8 @@ fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
 pub(crate) const HELP_LABEL_CHARS: usize = 16;
 
 /// One row of the key help: a margin, `label` bold and right-aligned in a column of
-/// [`HELP_LABEL_CHARS`], two spaces, `text`; neither touching the box at 80 columns (a test
-/// holds every row to its 78 inner columns).
+/// [`HELP_LABEL_CHARS`], two spaces, `text`; whole at 80 columns (a test holds every row to
+/// the box's 78 inner columns: the widest, the rate ladder, reaches its right edge).
 fn help_row<'a>(label: &str, text: &'a str) -> Line<'a> {
     Line::from(vec![
         format!(" {label:>w$}  ", w = HELP_LABEL_CHARS).bold(),

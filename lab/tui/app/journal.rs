@@ -126,14 +126,17 @@ impl App {
         self.back_notice = Some((at, notice));
     }
 
-    /// The message the footer shows: the last said, or, while that is a seek back's notice
-    /// and the run has moved on since (a step, a seek forward), the notice at the run time
-    /// the run is now at (not the one it was said at).
+    /// The message the footer shows: the last said; while that is a seek back's notice, the
+    /// notice at the run time the paused run is now at (a step or a seek moves it on from
+    /// where it was said), and nothing once the run goes on (space: it no longer waits
+    /// there).
     pub(super) fn shown_message(&self) -> Option<String> {
         match (&self.message, &self.back_notice) {
-            (Some(m), Some((at, said))) if m == said && *at != self.now => {
-                Some(back_notice(self.now))
-            }
+            (Some(m), Some((at, said))) if m == said => match (self.paused, *at == self.now) {
+                (false, _) => None,
+                (true, true) => Some(m.clone()),
+                (true, false) => Some(back_notice(self.now)),
+            },
             _ => self.message.clone(),
         }
     }

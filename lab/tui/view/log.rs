@@ -141,13 +141,13 @@ fn pane_rows(l: &LogView, width: usize, rows: usize) -> Vec<(String, bool, bool)
     shown
 }
 
-/// The log pane in `area`: its entries wrapped, the selected one at the bottom (bold while
-/// scrolled back), and in its title what the keys do.
 /// `1 line`, `40 lines`: the pane's count of entries as its title says it.
 fn lines(n: usize) -> String {
     ratelab::metrics::counted(n as u64, "line")
 }
 
+/// The log pane in `area`: its entries wrapped, the selected one at the bottom (bold while
+/// scrolled back), and in its title what the keys do.
 pub fn render_log(l: &LogView, area: Rect, buf: &mut Buffer) {
     let whole = if l.entries.last().is_some_and(|e| !e.traceback.is_empty()) {
         " · ↵ traceback"

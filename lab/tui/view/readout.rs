@@ -18,6 +18,7 @@
 use ratatui::text::Span;
 use ratelab::plant::GEAR_N;
 use ratelab::runlog::StepRecord;
+use ratelab::text::signed as s;
 use ratelab::Nanos;
 
 /// A topic's counters at the readout's tick, as the lab's arrows count them live.
@@ -90,9 +91,9 @@ impl Readout {
         let (theta, dot) = (self.theta_rad, self.theta_dot_rad_s);
         fit(
             [
-                format!("{t} · θ {theta:+.4} rad · θ̇ {dot:+.3} rad/s"),
-                format!("{t} θ {theta:+.4} rad θ̇ {dot:+.3} rad/s"),
-                format!("{t} θ {theta:+.3} θ̇ {dot:+.2}"),
+                format!("{t} · θ {} rad · θ̇ {} rad/s", s(theta, 4), s(dot, 3)),
+                format!("{t} θ {} rad θ̇ {} rad/s", s(theta, 4), s(dot, 3)),
+                format!("{t} θ {} θ̇ {}", s(theta, 3), s(dot, 2)),
             ],
             room,
         )
@@ -120,18 +121,20 @@ impl Readout {
             Some(e) => fit(
                 [
                     format!(
-                        "{t} · θ̇ {truth:+.3} · est {e:+.3} rad/s · error {:+.1} mrad/s",
-                        (e - truth) * 1e3
+                        "{t} · θ̇ {} · est {} rad/s · error {} mrad/s",
+                        s(truth, 3),
+                        s(e, 3),
+                        s((e - truth) * 1e3, 1)
                     ),
-                    format!("{t} · θ̇ {truth:+.3} · est {e:+.3} rad/s"),
-                    format!("{t} θ̇ {truth:+.2} est {e:+.2}"),
+                    format!("{t} · θ̇ {} · est {} rad/s", s(truth, 3), s(e, 3)),
+                    format!("{t} θ̇ {} est {}", s(truth, 2), s(e, 2)),
                 ],
                 room,
             ),
             None => fit(
                 [
-                    format!("{t} · θ̇ {truth:+.3} rad/s · no estimate yet"),
-                    format!("{t} θ̇ {truth:+.2} no est"),
+                    format!("{t} · θ̇ {} rad/s · no estimate yet", s(truth, 3)),
+                    format!("{t} θ̇ {} no est", s(truth, 2)),
                 ],
                 room,
             ),
@@ -143,7 +146,7 @@ impl Readout {
     /// · /obs 151 msgs, 37 dropped, 38 stale`, or a shorter form that fits (the counters'
     /// words shortened first, then the topic's name, then the counters left out).
     pub fn hold_line(&self, room: usize) -> String {
-        let force = format!("F {:+.2} N", self.force_n);
+        let force = format!("F {} N", s(self.force_n, 2));
         let (age, age_short) = match self.age_ms {
             Some(a) => (format!("cmd {} ms old", ms(a)), format!("{} ms old", ms(a))),
             None => ("no cmd yet".to_string(), "no cmd".to_string()),
@@ -196,34 +199,11 @@ fn fit<const N: usize>(forms: [String; N], room: usize) -> String {
     let mut last = String::new();
     for f in forms {
         if Span::raw(f.as_str()).width() <= room {
-            return no_negative_zero(&f);
+            return f;
         }
         last = f;
     }
-    no_negative_zero(&last)
-}
-
-/// `line` with every signed number that reads as zero written `+0.000`, not `-0.000` (a
-/// value such as -0.00001 rad printed to four places): the readout's signs say a direction,
-/// and a zero has none.
-fn no_negative_zero(line: &str) -> String {
-    let chars: Vec<char> = line.chars().collect();
-    let mut out = String::with_capacity(line.len());
-    for (i, &c) in chars.iter().enumerate() {
-        if c == '-' {
-            let number: Vec<char> = chars[i + 1..]
-                .iter()
-                .copied()
-                .take_while(|d| d.is_ascii_digit() || *d == '.')
-                .collect();
-            if number.first() == Some(&'0') && number.iter().all(|d| *d == '0' || *d == '.') {
-                out.push('+');
-                continue;
-            }
-        }
-        out.push(c);
-    }
-    out
+    last
 }
 
 #[cfg(test)]
@@ -233,19 +213,18 @@ mod tests {
 
     #[test]
     fn a_zero_reads_plus_zero_and_other_numbers_keep_their_sign() {
-        assert_eq!(
-            no_negative_zero("t=1.000 s · θ -0.0000 rad · θ̇ -0.045 rad/s"),
-            "t=1.000 s · θ +0.0000 rad · θ̇ -0.045 rad/s"
-        );
-        assert_eq!(no_negative_zero("error -0.0 mrad/s"), "error +0.0 mrad/s");
-        assert_eq!(no_negative_zero("F -0.01 N · -3"), "F -0.01 N · -3");
-        assert_eq!(no_negative_zero("a - b -0"), "a - b +0");
         let mut r = Readout::at(Nanos(2_340_000_000), &tick(), Some(obs()));
         r.theta_rad = -0.000_01;
+        r.force_n = -0.001;
         assert!(
-            r.plant_line(80).contains("θ +0.0000 rad"),
+            r.plant_line(80).contains("θ +0.0000 rad · θ̇ -0.045 rad/s"),
             "{}",
             r.plant_line(80)
+        );
+        assert!(
+            r.hold_line(80).starts_with("F +0.00 N"),
+            "{}",
+            r.hold_line(80)
         );
     }
 
