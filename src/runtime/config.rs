@@ -111,7 +111,7 @@ impl ConfigError {
             ConfigError::QueueDepth(e) => format!("{}: {e}", name(Setting::QueueDepth)),
             ConfigError::Graph(e) => e.to_string(),
             ConfigError::Duration(s) => format!(
-                "{} must be in (0, {MAX_DURATION_S}] seconds, got {} (ratelab::limits::MAX_DURATION_S)",
+                "{} must be in (0, {MAX_DURATION_S}] seconds (ten years), got {} (ratelab::limits::MAX_DURATION_S)",
                 name(Setting::Duration),
                 ratelab_core::text::number(*s)
             ),

@@ -437,7 +437,7 @@ fn a_number_that_looks_like_a_flag_is_judged_by_its_rule() {
         (
             "--duration",
             "1e300",
-            "--duration must be in (0, 315360000] seconds, got 1e300 (ratelab::limits::MAX_DURATION_S)",
+            "--duration must be in (0, 315360000] seconds (ten years), got 1e300 (ratelab::limits::MAX_DURATION_S)",
         ),
     ] {
         let o = limited(&["run", flag, value], WITHIN, |_| {});
