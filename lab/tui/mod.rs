@@ -2522,8 +2522,15 @@ mod tests {
                 .unwrap_or("")
                 .to_string()
         };
-        let (app, _rx) = app_after(virtual_cfg(50.0, 1), false);
+        let (mut app, _rx) = app_after(virtual_cfg(50.0, 1), false);
         assert!(footer(&app).contains("␣ pause"), "{}", footer(&app));
+        // Paused, space resumes.
+        let mut paused = chapter_status(Vec::new(), Vec::new());
+        if let Telemetry::Status { paused: p, .. } = &mut paused {
+            *p = true;
+        }
+        app.on_telemetry(paused);
+        assert!(footer(&app).contains("␣ resume"), "{}", footer(&app));
         let mut cfg = virtual_cfg(50.0, 1);
         cfg.clock = ClockKind::Real;
         let (app, _rx) = app_after(cfg, false);

@@ -1107,7 +1107,16 @@ fn render_footer(v: &View, area: Rect, buf: &mut Buffer) {
             .iter()
             .filter(|b| v.attached.is_none() || b.only_views())
             .filter(|b| v.clock != "real" || !b.pauses());
-        for (keys, word) in shown.filter_map(|b| b.footer) {
+        for b in shown {
+            let Some((keys, word)) = b.footer else {
+                continue;
+            };
+            // Paused, space resumes.
+            let word = if b.pauses() && v.paused {
+                "resume"
+            } else {
+                word
+            };
             spans.push(format!("{keys} ").bold());
             spans.push(format!("{word} ").into());
         }

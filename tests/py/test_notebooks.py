@@ -61,3 +61,26 @@ def test_a_node_class_from_a_cell_that_fails_names_the_cell_and_chains_its_error
     notebook = nbformat.v4.new_notebook(cells=[
         nbformat.v4.new_code_cell(cell), nbformat.v4.new_code_cell(check)])
     nbclient.NotebookClient(notebook, timeout=600, kernel_name="python3").execute()
+
+
+def test_a_brain_that_raises_in_a_notebook_shows_the_learner_s_frames_not_ratelab_s(tmp_path):
+    # The traceback a notebook prints for NodeFailed: the brain's cell line, then the call
+    # that ran it; neither ratelab's wrapper that called `act` (its `<ratelab>` frame) nor
+    # the keyword check around `run` (hidden from IPython) is among its frames.
+    import re
+
+    cell = "\n".join([
+        "import ratelab",
+        "def act(obs):",
+        "    return 1 / 0",
+        "ratelab.run(policy=act, duration_s=1, clock='virtual')",
+    ])
+    notebook = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(cell)])
+    nbclient.NotebookClient(notebook, timeout=600, kernel_name="python3",
+                            allow_errors=True).execute()
+    error = next(o for o in notebook.cells[0].outputs if o.get("output_type") == "error")
+    assert error["ename"] == "NodeFailed", error["ename"]
+    shown = "\n".join(re.sub(r"\x1b\[[0-9;]*m", "", line) for line in error["traceback"])
+    assert "Cell In[1], line 3, in act" in shown, shown
+    assert "<ratelab>" not in shown, shown
+    assert "checked" not in shown and "skipping hidden 1 frame" in shown, shown

@@ -422,6 +422,8 @@ def _keywords(fn: Callable) -> Callable:
 
     @functools.wraps(fn)
     def checked(*args: Any, **kwargs: Any) -> Any:
+        # IPython (a notebook's traceback) and pytest leave this wrapper's frame out.
+        __tracebackhide__ = True  # noqa: F841
         for key in kwargs:
             if key not in known:
                 raise SettingTypeError(_unknown_keyword(fn.__name__, key, taken))
