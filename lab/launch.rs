@@ -41,15 +41,7 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         headless::check_trace_every(&run)?;
         return headless::run_headless(&run, stop).map(|_| ());
     }
-    if run.trace_every > 1 {
-        anyhow::bail!("--trace-every thins trace.csv, which a launch across processes does not write (its --out holds metrics.json)");
-    }
-    if run.bag.is_some() {
-        anyhow::bail!("--bag writes a bag of a run in one process (run --ros2): a launch across processes does not write one yet");
-    }
-    if run.session.is_some() {
-        anyhow::bail!("--session is not available with --processes: a launch takes no live commands to log (its lab only watches)");
-    }
+    refuse_across_processes(&run)?;
     let on_terminal =
         !force_headless && std::io::stdout().is_terminal() && std::io::stdin().is_terminal();
     let mut cfg = headless::config_from_args(&run)?;
@@ -170,6 +162,21 @@ pub fn run_launch(a: &LaunchArgs, force_headless: bool, stop: StopFlag) -> anyho
         ratelab::text::listed(missing.iter().map(String::as_str))
     );
     ratelab::outputs::end_is_an_error(&report)
+}
+
+/// The run flags a launch across processes cannot honour, refused in one line each rather
+/// than ignored: a bag, a session log, a thinned trace.csv (it writes none).
+fn refuse_across_processes(run: &crate::cli::RunArgs) -> anyhow::Result<()> {
+    if run.trace_every > 1 {
+        anyhow::bail!("--trace-every thins trace.csv, which a launch across processes does not write (its --out holds metrics.json)");
+    }
+    if run.bag.is_some() {
+        anyhow::bail!("--bag writes a bag of a run in one process (run --ros2): a launch across processes does not write one yet");
+    }
+    if run.session.is_some() {
+        anyhow::bail!("--session is not available with --processes: a launch takes no live commands to log (its lab only watches)");
+    }
+    Ok(())
 }
 
 /// `--kill-process`'s kills, checked: each names a process of the graph that this launch
