@@ -233,10 +233,10 @@ pub struct App {
     message: Option<String>,
     /// When the message was set (a fresh one leads the footer for [`FRESH`]).
     message_at: Option<std::time::Instant>,
-    /// The notice a seek back said and the run time it named: while it is the message, it
+    /// The run time the last seek back went to: while its notice is the message, the notice
     /// names where the run is now ([`App::shown_message`]: a step or a seek from there moves
     /// the run on).
-    back_notice: Option<(Nanos, String)>,
+    back_at: Option<Nanos>,
     /// Watching a graph that runs across processes (`ratelab lab --attach`): the header's
     /// note (`2 processes`); keys that would change the graph are refused.
     attached: Option<String>,
@@ -353,7 +353,7 @@ impl App {
             typing: None,
             message: None,
             message_at: None,
-            back_notice: None,
+            back_at: None,
             confirm_quit: false,
             attached: None,
             journal: Vec::new(),

@@ -126,6 +126,7 @@ pub fn listed_at_most<'a>(names: impl IntoIterator<Item = &'a str>, most: usize)
 
 #[cfg(test)]
 mod tests {
+    use super::*;
 
     #[test]
     fn a_signed_zero_reads_plus_zero() {
@@ -137,8 +138,6 @@ mod tests {
         assert_eq!(signed(-12.0, 0), "-12");
         assert_eq!(signed(f64::NAN, 1), "NaN");
     }
-
-    use super::*;
 
     #[test]
     fn a_list_names_its_first_few_and_counts_the_rest() {

@@ -288,7 +288,8 @@ fn described(py: Python<'_>, err: &PyErr, script: &str) -> (PyErr, String) {
     (err, line)
 }
 
-/// A copy of `err` whose traceback starts at the first frame that is not ratelab's own
+/// `err` (a new handle on the same exception) with its traceback starting at the first
+/// frame that is not ratelab's own
 /// support code (`<ratelab>`, the wrapper that called the learner's function): what a
 /// learner debugs into (`NodeFailed.__cause__`, `%debug`, the lab's log pane) begins at
 /// their own line, as an exception raised by a function they called themselves would.

@@ -124,23 +124,7 @@ mod layout;
 mod legend;
 mod live;
 pub use files::timeline_name;
-pub use live::viewer_on_path;
-
-/// How a user gets the stock rerun viewer that opens ratelab's recordings: the version
-/// `pip install rerun-sdk` gives today (0.41; docs/recordings.md says why ratelab writes with
-/// the crate 0.36.3, which that viewer reads).
-pub const VIEWER_INSTALL: &str = "pip install rerun-sdk==0.41.0";
-
-/// The line that tells a user how to open the recording at `path`: `open it with: rerun
-/// PATH`, and where no `rerun` is on PATH, how to get one ([`VIEWER_INSTALL`]).
-pub fn open_hint(path: &Path) -> String {
-    let open = format!("open it with: rerun {}", path.display());
-    if viewer_on_path() {
-        open
-    } else {
-        format!("{open} (no rerun on PATH: {VIEWER_INSTALL})")
-    }
-}
+pub use live::{open_hint, viewer_on_path, VIEWER_INSTALL};
 mod observer;
 mod settings;
 mod shape;

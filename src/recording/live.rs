@@ -1,5 +1,5 @@
 //! The live half of a `--spawn` recording: a gRPC sink to the spawned viewer that can never
-//! hold up the file (and whether there is a viewer on PATH to spawn).
+//! hold up the file (and whether there is a viewer on PATH to spawn, and how to get one).
 //!
 //! rerun's `GrpcSink` keeps retrying to connect for as long as it takes and queues at most
 //! 100 messages meanwhile; the 101st `send` then blocks. Beside a `FileSink` in one
@@ -118,6 +118,22 @@ impl LogSink for LiveSink {
 
     fn default_batcher_config(&self) -> ChunkBatcherConfig {
         self.shared.grpc.default_batcher_config()
+    }
+}
+
+/// How a user gets the stock rerun viewer that opens ratelab's recordings: the version
+/// `pip install rerun-sdk` gives today (0.41; docs/recordings.md says why ratelab writes with
+/// the crate 0.36.3, which that viewer reads and takes a live stream from).
+pub const VIEWER_INSTALL: &str = "pip install rerun-sdk==0.41.0";
+
+/// The line that tells a user how to open the recording at `path`: `open it with: rerun
+/// PATH`, and where no `rerun` is on PATH, how to get one ([`VIEWER_INSTALL`]).
+pub fn open_hint(path: &std::path::Path) -> String {
+    let open = format!("open it with: rerun {}", path.display());
+    if viewer_on_path() {
+        open
+    } else {
+        format!("{open} (no rerun on PATH: {VIEWER_INSTALL})")
     }
 }
 

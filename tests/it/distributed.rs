@@ -116,8 +116,6 @@ pub(crate) fn free_port() -> u16 {
         .port()
 }
 
-/// The chapter's two processes, linked directly: each hears the other's reports and
-/// samples over their own link.
 /// A watcher's session on the launch listening on `ep`: a client of its router (as `top`
 /// and the lab attached are), as the observer of the credentials the launch exports to
 /// `creds`, once they are written (within `within`).
@@ -144,6 +142,8 @@ pub(crate) fn observer_of(
     ratelab::distributed::open_client(&[ep.to_string()], access).unwrap()
 }
 
+/// The chapter's two processes, linked directly: each hears the other's reports and
+/// samples over their own link.
 #[test]
 fn virtual_lockstep_is_byte_identical_to_the_in_process_run() {
     assert_lockstep_equals_in_process(&[], &["graphs/cartpole.toml"]);

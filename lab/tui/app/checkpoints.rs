@@ -328,7 +328,7 @@ impl App {
             show_ros2: _,
             help: _,
             // Said by the seek back that folds the journal, after it.
-            back_notice: _,
+            back_at: _,
             confirm_quit: _,
             typing: _,
             attached: _,

@@ -121,9 +121,8 @@ impl App {
         // Folded again, the journal told of it: not the branch's (above).
         self.faults.injected.retain(|f| f.at <= at);
         self.now = at;
-        let notice = back_notice(at);
-        self.say(notice.clone());
-        self.back_notice = Some((at, notice));
+        self.say(back_notice(at));
+        self.back_at = Some(at);
     }
 
     /// The message the footer shows: the last said; while that is a seek back's notice, the
@@ -131,12 +130,10 @@ impl App {
     /// where it was said), and nothing once the run goes on (space: it no longer waits
     /// there).
     pub(super) fn shown_message(&self) -> Option<String> {
-        match (&self.message, &self.back_notice) {
-            (Some(m), Some((at, said))) if m == said => match (self.paused, *at == self.now) {
-                (false, _) => None,
-                (true, true) => Some(m.clone()),
-                (true, false) => Some(back_notice(self.now)),
-            },
+        match self.back_at {
+            Some(at) if self.message.as_deref() == Some(back_notice(at).as_str()) => {
+                self.paused.then(|| back_notice(self.now))
+            }
             _ => self.message.clone(),
         }
     }
