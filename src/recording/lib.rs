@@ -124,7 +124,7 @@ mod layout;
 mod legend;
 mod live;
 pub use files::timeline_name;
-pub use live::{open_hint, viewer_on_path, VIEWER_INSTALL};
+pub use live::{open_hint, viewer_on_path, VIEWER_INSTALL, VIEWER_VERSION};
 mod observer;
 mod settings;
 mod shape;
@@ -656,7 +656,7 @@ impl Recording {
         let live = opts.spawn && viewer_on_path();
         if opts.spawn && !live {
             notice = Some(
-                format!("no rerun viewer on PATH: recording to the file only (install one: {VIEWER_INSTALL}, or cargo install rerun-cli --locked --version 0.41.0)"),
+                format!("no rerun viewer on PATH: recording to the file only (install one: {VIEWER_INSTALL}, or cargo install rerun-cli --locked --version {VIEWER_VERSION})"),
             );
         }
         let rec = if live {

@@ -121,10 +121,22 @@ impl LogSink for LiveSink {
     }
 }
 
-/// How a user gets the stock rerun viewer that opens ratelab's recordings: the version
-/// `pip install rerun-sdk` gives today (0.41; docs/recordings.md says why ratelab writes with
-/// the crate 0.36.3, which that viewer reads and takes a live stream from).
-pub const VIEWER_INSTALL: &str = "pip install rerun-sdk==0.41.0";
+/// The version of the stock rerun viewer ratelab's recordings are drawn with and checked
+/// against: what `pip install rerun-sdk` gives today (docs/recordings.md says why ratelab
+/// writes with the crate 0.36.3, which that viewer reads and takes a live stream from).
+macro_rules! viewer_version {
+    () => {
+        "0.41.0"
+    };
+}
+
+/// [`VIEWER_INSTALL`]'s version, for the other ways to get that viewer (`cargo install
+/// rerun-cli --version …`).
+pub const VIEWER_VERSION: &str = viewer_version!();
+
+/// How a user gets the stock rerun viewer that opens ratelab's recordings
+/// ([`VIEWER_VERSION`]).
+pub const VIEWER_INSTALL: &str = concat!("pip install rerun-sdk==", viewer_version!());
 
 /// The line that tells a user how to open the recording at `path`: `open it with: rerun
 /// PATH`, and where no `rerun` is on PATH, how to get one ([`VIEWER_INSTALL`]).
