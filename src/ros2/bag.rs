@@ -17,8 +17,9 @@
 //! (`mcap_storage.cpp`, `create_topic`): `offered_qos_profiles` (that YAML) and
 //! `topic_type_hash` (`RIHS01_<64 hex>`), where `ros2 bag play` and `ros2 bag info` read
 //! them. MCAP is written by the `mcap` crate,
-//! the YAML by `serde_yaml`; a bag cut short (killed run) has its MCAP data but no
-//! `metadata.yaml`, which `ros2 bag reindex` rebuilds. A bag that could not be written
+//! the YAML by `serde_yaml`; a bag cut short (killed run) has its MCAP data, all but the
+//! last [`FLUSH_PERIOD`] of it at most, but no `metadata.yaml`, which `ros2 bag reindex`
+//! rebuilds. A bag that could not be written
 //! whole (a full disk) is not left under its name: its MCAP file is removed, and the run
 //! says so and fails ([`Bag::finish`]), as `--out` and `--record` do.
 
@@ -187,7 +188,17 @@ pub struct Bag {
     /// The first write that failed (a full disk): later messages are not written, and
     /// [`Bag::finish`] removes the file.
     failed: Option<String>,
+    /// When the MCAP data was last put in the file whole ([`FLUSH_PERIOD`]).
+    flushed: std::time::Instant,
 }
+
+/// How long, in wall time, a message may wait in the MCAP writer's open chunk before the
+/// chunk is closed and written to the file: what a run killed outright (SIGKILL, the OOM
+/// killer) loses of its bag at most. The `mcap` crate writes a chunk only when it reaches
+/// its size (1 MiB, hours of the chapter's topics), so a killed run's bag held no message
+/// at all. Closing a chunk is `mcap::Writer::flush`, which leaves the file readable up to
+/// there (the MCAP specification's "chunk" records; Foxglove's writers flush so too).
+pub const FLUSH_PERIOD: std::time::Duration = std::time::Duration::from_secs(1);
 
 fn io(what: &Path, e: impl std::fmt::Display) -> Ros2Error {
     Ros2Error::Usage(format!("--bag {}: {e}", what.display()))
@@ -356,6 +367,7 @@ impl Bag {
             first_ns: None,
             last_ns: 0,
             failed: None,
+            flushed: std::time::Instant::now(),
         })
     }
 
@@ -427,6 +439,10 @@ impl Bag {
         t.count += 1;
         self.first_ns.get_or_insert(t_ns);
         self.last_ns = self.last_ns.max(t_ns);
+        if self.flushed.elapsed() >= FLUSH_PERIOD {
+            self.writer.flush().map_err(|e| e.to_string())?;
+            self.flushed = std::time::Instant::now();
+        }
         Ok(())
     }
 

@@ -420,13 +420,24 @@ impl Walk<'_, '_> {
             }
             let record = match record {
                 Ok(r) => r,
-                // A length past the whole file is a lie, not a bag cut short (whose last
-                // record runs past where the file stops, but not past its size).
+                // A record longer than the whole file: every record before it was read
+                // whole, so the file stops inside this one, as a bag cut short does (a
+                // writer killed inside a chunk leaves its length unwritten, 2^64 − 1;
+                // a file cut inside a chunk leaves one longer than what is left of it).
+                // Read as far as it goes, and said; nothing is held for the length.
                 Err(mcap::McapError::RecordTooLarge { opcode, len }) => {
-                    return Err(format!(
-                        "a record (opcode {opcode:#04x}) declares {len} bytes, more than the whole file holds ({}): a damaged or hostile bag",
-                        self.bag.bytes.len()
-                    ))
+                    let what = if opcode == mcap::records::op::CHUNK && len == u64::MAX {
+                        "a chunk its writer never finished".to_string()
+                    } else {
+                        format!(
+                            "a record (opcode {opcode:#04x}) of {len} bytes where the file holds {}",
+                            self.bag.bytes.len()
+                        )
+                    };
+                    return Ok(Some(format!(
+                        "the bag stops short after {} messages, inside {what}: cut short?",
+                        self.count
+                    )));
                 }
                 Err(mcap::McapError::ChunkTooLarge(len)) => {
                     return Err(format!(

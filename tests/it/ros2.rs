@@ -824,6 +824,71 @@ fn a_bag_of_the_run_reads_back_with_rosbags_every_message_the_same_on_every_run(
     assert!(stray.exists() && first.join("metadata.yaml").exists());
 }
 
+/// A run killed outright (SIGKILL: no end, no summary, no `metadata.yaml`) leaves a bag
+/// that reads up to its last second ([`ratelab::ros2::bag::FLUSH_PERIOD`]): the writer
+/// closes its chunk every second, where it held every message in one chunk until the run
+/// ended, and a killed run's bag held none. The reader says where the file stops.
+#[test]
+fn a_run_killed_outright_leaves_a_bag_that_reads_up_to_its_last_second() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("killed");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args([
+            "run",
+            "--clock",
+            "real",
+            "--duration",
+            "60",
+            "--ros2",
+            "--bag",
+        ])
+        .arg(&path)
+        .env_remove("ROS_DOMAIN_ID")
+        .env("ZENOH_ROUTER_CHECK_ATTEMPTS", "-1")
+        .env(
+            "ZENOH_CONFIG_OVERRIDE",
+            format!("connect/endpoints=[\"tcp/127.0.0.1:{}\"]", free_port()),
+        )
+        .current_dir(dir.path())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mcap = path.join("killed_0.mcap");
+    let start = std::time::Instant::now();
+    while !mcap.exists() && start.elapsed() < std::time::Duration::from_secs(30) {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    assert!(mcap.exists(), "the run made no bag in 30 s");
+    // Three seconds of a 50 Hz run: two of them at least are in the file.
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(!path.join("metadata.yaml").exists());
+    let (code, stdout, stderr) = ratelab(&["ros2", "bag", "info", path.to_str().unwrap()], &[]);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    assert!(stdout.contains("cut short?"), "{stdout}");
+    let obs: u64 = stdout
+        .lines()
+        .find_map(|l| {
+            l.contains("Topic: /obs |")
+                .then(|| {
+                    l.rsplit("Count: ")
+                        .next()?
+                        .split_whitespace()
+                        .next()?
+                        .parse()
+                        .ok()
+                })
+                .flatten()
+        })
+        .unwrap_or_else(|| panic!("no /obs in: {stdout}"));
+    assert!(
+        obs >= 50,
+        "{obs} /obs messages in the killed run's bag: {stdout}"
+    );
+}
+
 #[test]
 fn a_finished_bridge_withdraws_its_tokens_and_the_next_takes_fresh_ids_on_the_same_session() {
     use ratelab::ros2::session::{open, SessionEnv};
