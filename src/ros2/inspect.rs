@@ -516,7 +516,8 @@ pub fn topic_info(g: &Seen, topic: &str, verbose: bool) -> Result<String, String
     if verbose {
         out.push_str(&block(EndpointKind::Subscription, "SUBSCRIPTION"));
     }
-    Ok(out.trim_end().to_string() + "\n")
+    // `-v` ends on the empty line after its last endpoint (or its last count), as ros2cli's.
+    Ok(out)
 }
 
 /// Open a Zenoh session for reading a domain: a client of the router at `connect`

@@ -105,6 +105,21 @@ fn a_latched_topic_is_echoed_at_once_as_real_ros2cli_echoes_it() {
     assert_eq!((code, real_rc), (0, 0), "{err}");
     assert_eq!(qos_block(&info), qos_block(&real_info));
     assert!(real_info.contains("  Durability: TRANSIENT_LOCAL\n"));
+    // Line for line, but the GIDs (each run's own): to its last line, the empty one after
+    // the last endpoint (ratelab left it out).
+    let gids = |s: &str| -> String {
+        (s.lines())
+            .map(|l| {
+                if l.starts_with("GID: ") {
+                    "GID: …\n".to_string()
+                } else {
+                    format!("{l}\n")
+                }
+            })
+            .collect()
+    };
+    assert!(real_info.ends_with("\n\n"), "{real_info:?}");
+    assert_eq!(gids(&info), gids(&real_info));
     // What the real node published; what its publisher stores (its depth, from ros2cli).
     let sent: serde_json::Value =
         serde_json::from_slice(&std::fs::read(&published).unwrap()).unwrap();
