@@ -114,7 +114,7 @@ pub enum BagVerb {
     Echo {
         /// The bag's folder.
         dir: std::path::PathBuf,
-        /// Only this topic's messages.
+        /// Only this topic's messages (a relative name, `obs`, is `/obs`).
         #[arg(long)]
         topic: Option<String>,
         /// At most this many messages.
@@ -837,6 +837,8 @@ fn bag(verb: &BagVerb, stop: &StopFlag) -> Result<()> {
             write!(out, "{}", b.info(&stopped).map_err(|e| anyhow!(e))?)?;
         }
         BagVerb::Echo { dir, topic, count } => {
+            // A relative name is the root namespace's, as `topic echo` takes it.
+            let topic = topic.as_deref().map(expanded);
             let b = Bag::open(dir).map_err(|e| anyhow!(e))?;
             let mut printed = 0u64;
             let mut failed = None;
@@ -887,7 +889,7 @@ fn bag(verb: &BagVerb, stop: &StopFlag) -> Result<()> {
                 let named = ratelab::text::listed(others.iter().map(String::as_str));
                 return Err(anyhow!(
                     "no messages on {} in this bag (its topics: {})",
-                    ratelab::text::printable(want),
+                    ratelab::text::printable(&want),
                     if others.is_empty() { "none" } else { &named },
                 ));
             }

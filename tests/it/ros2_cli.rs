@@ -566,6 +566,9 @@ fn bag_info_and_echo_read_ratelab_s_bags_rosbags_bags_and_bags_cut_short() {
     );
     assert!(out.contains("# /obs at 0.020000000 s\n"), "{out}");
     assert_eq!(out.matches("---\n").count(), 2, "{out}");
+    // A relative name is the root namespace's, as `topic echo` takes it.
+    let (code, relative, err) = echo_ours(&["--topic", "obs", "-n", "2"]);
+    assert_eq!((code, relative), (0, out), "{err}");
     // A topic with no messages in the bag (a typo) is said, with the topics it has.
     let (code, out, err) = echo_ours(&["--topic", "/ob"]);
     assert_eq!((code, out.as_str()), (2, ""), "{err}");
