@@ -203,6 +203,11 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
             "--stall/--kill: the bench times every tick, a faulted one too, so its table would not show them; use `ratelab run` or `ratelab lab` with them"
         );
     }
+    if let Some((node, _)) = a.graph.rates.first() {
+        anyhow::bail!(
+            "--rate {node}=…: the bench runs every node at each --hz, so a node's own rate would not be timed; give the rates to time with --hz"
+        );
+    }
     let duration = base.duration;
     if let Some(us) = a.spin_margin_us {
         for &hz in &a.hz {
@@ -237,7 +242,7 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
         })
         .collect();
     println!(
-        "real-clock timing: every node at one rate{}, {} s each, spin margin {}{}, {} cores",
+        "real-clock timing (p50/p99/max: how late each tick started past its deadline): every node at one rate{}, {} s each, spin margin {}{}, {} cores",
         if a.stagger { ", staggered by P/n" } else { "" },
         a.duration,
         margins.join(", "),

@@ -190,15 +190,16 @@ pub enum ExerciseError {
     /// No exercise has this name.
     #[error("unknown exercise '{0}' (expected {list})", list = expected())]
     Unknown(String),
-    /// The learner's file has no prediction yet.
-    #[error(
-        "{path} has no prediction yet: fill in [prediction] ({keys} and why) first — predicting is the exercise"
-    )]
+    /// The learner's file has no prediction yet, or lacks part of it (`missing`: a key, or
+    /// a `why` that says something).
+    #[error("{}", no_prediction(path, keys, missing))]
     NoPrediction {
         /// The learner's file.
         path: String,
         /// The keys it needs, comma-separated.
         keys: String,
+        /// Those it lacks, `why` among them when it is missing or blank.
+        missing: Vec<String>,
     },
     /// A prediction given in place of the learner's file's (Python's `prediction=`) that
     /// lacks a key the exercise asks for, or holds one it does not.
@@ -262,15 +263,27 @@ fn read_text(path: &Path) -> Result<String, ExerciseError> {
     })
 }
 
+/// `e` in one line: its first (the TOML parser's "TOML parse error at line L, column C"), then
+/// the lines that give the reason ("invalid string; expected `\"`, `'`"), without those
+/// that quote the file (`22 | x = = 1`, `|     ^`).
 fn parse_error(path: &str, e: &impl std::fmt::Display) -> ExerciseError {
+    let text = e.to_string();
+    let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
+    let first = lines.next().unwrap_or("invalid TOML");
+    let quotes = |l: &str| {
+        l.trim_start_matches(|c: char| c.is_ascii_digit())
+            .trim_start()
+            .starts_with('|')
+    };
+    let reason: Vec<&str> = lines.filter(|l| !quotes(l)).collect();
+    let detail = if reason.is_empty() {
+        first.to_string()
+    } else {
+        format!("{first}: {}", reason.join("; "))
+    };
     ExerciseError::Parse {
         path: path.to_string(),
-        detail: e
-            .to_string()
-            .lines()
-            .next()
-            .unwrap_or("invalid TOML")
-            .to_string(),
+        detail: ratelab_core::text::printable(&detail).into_owned(),
     }
 }
 
@@ -559,11 +572,14 @@ fn number(v: &toml::Value) -> Option<f64> {
     (v.as_float().or_else(|| v.as_integer().map(|i| i as f64))).filter(|x| x.is_finite())
 }
 
-/// The sentence for a prediction key that is missing or not of the expected type.
+/// The sentence for a prediction key that is not of the type the exercise reads (one left
+/// out is refused before the runs, [`ExerciseError::NoPrediction`]).
 fn unreadable(key: &str) -> Said {
     Said {
         key: key.to_string(),
-        line: format!("Your prediction `{key}` is missing or not of the expected type."),
+        line: format!(
+            "Your prediction `{key}` is not of the type this exercise reads (the comment above it in the file gives an example)."
+        ),
         verdict: Verdict::Unreadable,
     }
 }
@@ -810,6 +826,30 @@ pub fn run(
 
 /// What `prediction` lacks of what an exercise asks for: each `required` key not there, then
 /// `why` when it is not a string that says something. Empty: the prediction is filled in.
+/// [`ExerciseError::NoPrediction`]'s line: the whole prediction asked for when the file has
+/// none of it; else the part it lacks, by name.
+fn no_prediction(path: &str, keys: &str, missing: &[String]) -> String {
+    let all = keys.split(", ").filter(|k| !k.is_empty()).count() + 1;
+    if missing.len() >= all {
+        return format!(
+            "{path} has no prediction yet: fill in [prediction] ({keys} and why) first — predicting is the exercise"
+        );
+    }
+    let named: Vec<String> = (missing.iter())
+        .map(|k| {
+            if k == "why" {
+                "why (a sentence: what you expect and why)".to_string()
+            } else {
+                k.clone()
+            }
+        })
+        .collect();
+    format!(
+        "{path}: [prediction] lacks {}: fill it in first — predicting is the exercise",
+        ratelab_core::text::listed(named.iter().map(String::as_str))
+    )
+}
+
 fn missing_from<'a>(required: &[&'a str], prediction: &toml::Table) -> Vec<&'a str> {
     let said_why =
         (prediction.get("why").and_then(toml::Value::as_str)).is_some_and(|w| !w.trim().is_empty());
@@ -870,10 +910,12 @@ pub fn run_report(
         check_given_prediction(exercise.id(), exercise.required_keys(), prediction)?;
         file.prediction = prediction.clone();
     }
-    if !file.has_prediction(exercise.required_keys()) {
+    let missing = missing_from(exercise.required_keys(), &file.prediction);
+    if !missing.is_empty() {
         return Err(ExerciseError::NoPrediction {
             path: path.display().to_string(),
             keys: exercise.required_keys().join(", "),
+            missing: missing.into_iter().map(str::to_string).collect(),
         });
     }
     let bands =
@@ -1271,7 +1313,7 @@ mod tests {
             let said = &f.reconcile(&ex5)[2];
             assert!(
                 said.line.contains("other than hold, zero, reliable")
-                    || said.line.contains("not of the expected type"),
+                    || said.line.contains("not of the type this exercise reads"),
                 "{bad}: {}",
                 said.line
             );
@@ -1281,6 +1323,26 @@ mod tests {
         let said = &f.reconcile(&ex5)[2];
         assert!(said.line.contains("up at 80% loss: none; what did"));
         assert_eq!(said.verdict, Missed);
+    }
+
+    #[test]
+    fn a_toml_error_is_one_line_with_its_place_and_its_reason() {
+        let e = toml::from_str::<toml::Table>("[prediction]\nx = = 1\n").unwrap_err();
+        let ExerciseError::Parse { detail, .. } = parse_error("f.toml", &e) else {
+            panic!()
+        };
+        assert!(
+            detail.starts_with("TOML parse error at line 2, column 5: "),
+            "{detail}"
+        );
+        assert!(
+            !detail.contains('\n') && !detail.contains('|') && !detail.contains("x = = 1"),
+            "{detail}"
+        );
+        assert!(
+            detail.len() > "TOML parse error at line 2, column 5: ".len() + 3,
+            "{detail}"
+        );
     }
 
     #[test]
@@ -1326,7 +1388,7 @@ mod tests {
         let said = f.reconcile(&Ex3Outcome {
             matched_obs_drops: 7,
         });
-        assert!(said[0].line.contains("not of the expected type"));
+        assert!(said[0].line.contains("not of the type this exercise reads"));
         assert_eq!(said[0].verdict, Verdict::Unreadable);
     }
 

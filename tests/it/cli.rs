@@ -289,15 +289,37 @@ fn exercise_refuses_without_a_prediction_then_runs_with_one() {
         std::fs::copy(repo.join(f), dir.path().join(f)).unwrap();
     }
     let file = dir.path().join("ex2_queue_trap.toml");
-    let text = std::fs::read_to_string(&file)
-        .unwrap()
+    let shipped = std::fs::read_to_string(&file).unwrap();
+    // Part of a prediction: refused, naming what is left out (it said the whole prediction
+    // was missing, a blank `why` beside two keys filled in).
+    let keys = shipped
         .replace("# deep_queue_obs_drops =\n", "deep_queue_obs_drops = 0\n")
-        .replace("# deep_queue_balances =\n", "deep_queue_balances = false\n")
-        .replace(
-            "why = \"\"",
-            "why = \"the policy still reads only the newest reading\"",
+        .replace("# deep_queue_balances =\n", "deep_queue_balances = false\n");
+    let why = "why = \"the policy still reads only the newest reading\"";
+    for (text, lacks) in [
+        (
+            keys.clone(),
+            "lacks why (a sentence: what you expect and why): ",
+        ),
+        (
+            shipped
+                .replace("# deep_queue_obs_drops =\n", "deep_queue_obs_drops = 0\n")
+                .replace("why = \"\"", why),
+            "lacks deep_queue_balances: ",
+        ),
+    ] {
+        std::fs::write(&file, text).unwrap();
+        let o = ratelab(&["exercise", "ex2", "--dir", dir.path().to_str().unwrap()]);
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert_eq!(
+            stderr(&o).trim_end(),
+            format!(
+                "error: {}: [prediction] {lacks}fill it in first — predicting is the exercise",
+                file.display()
+            )
         );
-    std::fs::write(&file, text).unwrap();
+    }
+    std::fs::write(&file, keys.replace("why = \"\"", why)).unwrap();
     let o = ratelab(&["exercise", "ex2", "--dir", dir.path().to_str().unwrap()]);
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -423,6 +445,12 @@ fn bench_takes_a_run_s_settings_by_its_rules_and_refuses_faults_it_would_not_sho
     );
     // The graph's overrides are a run's, checked as `run` checks them.
     assert_usage_error(&["bench", "--rate", "nobody=10"], "--rate nobody=10: ");
+    // A node's own rate would not be timed (every node runs at each --hz): refused, not
+    // ignored.
+    assert_usage_error(
+        &["bench", "--rate", "policy=10"],
+        "error: --rate policy=…: the bench runs every node at each --hz",
+    );
     // The frame and scrub timings take none of the real-clock timing's settings: refused
     // beside them, not ignored.
     assert_usage_error(
@@ -962,7 +990,7 @@ fn an_exercise_whose_prediction_cannot_be_read_exits_1() {
     assert_eq!(o.status.code(), Some(1), "{out}{}", stderr(&o));
     assert!(
         out.contains(
-            "Your prediction `deep_queue_obs_drops` is missing or not of the expected type."
+            "Your prediction `deep_queue_obs_drops` is not of the type this exercise reads (the comment above it in the file gives an example)."
         ),
         "{out}"
     );
