@@ -21,9 +21,9 @@ pub struct Ros2Args {
     /// rmw_zenoh's nodes find theirs).
     #[arg(long, global = true, value_name = "ENDPOINT")]
     pub connect: Option<String>,
-    /// How long to wait for the graph's liveliness tokens, seconds in [0, 3600].
-    #[arg(long, global = true, default_value = "1", value_name = "S", value_parser = wait_s, allow_negative_numbers = true)]
-    pub wait: Duration,
+    /// How long to wait for the graph's liveliness tokens, seconds in [0, 3600] (default 1).
+    #[arg(long, global = true, value_name = "S", value_parser = wait_s, allow_negative_numbers = true)]
+    pub wait: Option<Duration>,
     /// ros2cli's `--no-daemon`, taken so that ros2 commands and scripts carry over as they
     /// are: ratelab never uses a daemon (each command reads the graph itself), so it changes
     /// nothing.
@@ -120,6 +120,20 @@ pub enum BagVerb {
         /// At most this many messages.
         #[arg(short = 'n', long = "max-count", value_name = "N")]
         count: Option<u64>,
+    },
+    /// ros2cli's `bag record`: not here (refused in one line saying how ratelab writes a bag).
+    #[command(hide = true)]
+    Record {
+        /// Whatever it was given.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        rest: Vec<String>,
+    },
+    /// ros2cli's `bag play`: not here (refused in one line saying what plays one).
+    #[command(hide = true)]
+    Play {
+        /// Whatever it was given.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        rest: Vec<String>,
     },
 }
 
@@ -393,10 +407,19 @@ fn warn(w: &str) {
 /// Ctrl-C as [`Interrupted`], with ros2cli's exit code.
 pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
     if let Ros2Command::Bag(verb) = &args.what {
+        // A bag is read from its files: the graph's settings would change nothing.
+        let given = [
+            ("--domain", args.domain.is_some()),
+            ("--connect", args.connect.is_some()),
+            ("--wait", args.wait.is_some()),
+        ];
+        if let Some((flag, _)) = given.iter().find(|(_, given)| *given) {
+            anyhow::bail!("{flag}: `ros2 bag` reads the bag's files, not a graph, so it takes no graph settings");
+        }
         return bag(verb, &stop);
     }
     let domain = domain(args)?;
-    let wait = args.wait;
+    let wait = args.wait.unwrap_or(DEFAULT_WAIT);
     let env = ratelab::ros2::session::SessionEnv::from_process();
     let session = inspect::open(args.connect.as_deref(), &env, &stop)?;
     let g = inspect::seen(&session, domain, wait)?;
@@ -737,6 +760,9 @@ fn time_limit(s: &str) -> Result<Duration, String> {
 ///
 /// # Errors
 /// One line when `S` is not a number or not in the range.
+/// How long a verb waits for the graph's liveliness tokens when `--wait` is not given.
+const DEFAULT_WAIT: Duration = Duration::from_secs(1);
+
 fn wait_s(s: &str) -> Result<Duration, String> {
     seconds_in(s, (true, 3600.0))
 }
@@ -832,6 +858,12 @@ fn bag(verb: &BagVerb, stop: &StopFlag) -> Result<()> {
     use ratelab::ros2::bag_reader::Bag;
     let mut out = std::io::stdout().lock();
     match verb {
+        BagVerb::Record { .. } => anyhow::bail!(
+            "`ros2 bag record` is not ratelab's: a run writes its own bag with `ratelab run --ros2 --bag DIR` (every topic, as `ros2 bag record -a`)"
+        ),
+        BagVerb::Play { .. } => anyhow::bail!(
+            "`ros2 bag play` is not ratelab's: play a bag with ROS 2's own `ros2 bag play DIR`; `ratelab ros2 bag echo DIR` prints its messages"
+        ),
         BagVerb::Info { dir } => {
             let b = Bag::open(dir).map_err(|e| anyhow!(e))?;
             write!(out, "{}", b.info(&stopped).map_err(|e| anyhow!(e))?)?;

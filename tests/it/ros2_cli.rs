@@ -569,6 +569,29 @@ fn bag_info_and_echo_read_ratelab_s_bags_rosbags_bags_and_bags_cut_short() {
     // A relative name is the root namespace's, as `topic echo` takes it.
     let (code, relative, err) = echo_ours(&["--topic", "obs", "-n", "2"]);
     assert_eq!((code, relative), (0, out), "{err}");
+    // A bag is read from its files: a graph's setting is refused, not ignored; ros2cli's
+    // `bag record` and `bag play` say what does their work.
+    for (args, said) in [
+        (
+            &["info", "--domain", "999"][..],
+            "error: --domain: `ros2 bag` reads the bag's files, not a graph",
+        ),
+        (
+            &["echo", "--wait", "2"][..],
+            "error: --wait: `ros2 bag` reads the bag's files",
+        ),
+        (&["record", "-a"][..], "`ratelab run --ros2 --bag DIR`"),
+        (&["play"][..], "ROS 2's own `ros2 bag play DIR`"),
+    ] {
+        let bag = ours.to_str().unwrap();
+        let args = [&["ros2", "bag"][..], &args[..1], &[bag], &args[1..]].concat();
+        let (code, out, err) = ratelab(&args, &[]);
+        assert_eq!((code, out.as_str()), (2, ""), "{args:?}: {err}");
+        assert!(
+            err.contains(said) && err.trim_end().lines().count() == 1,
+            "{args:?}: {err}"
+        );
+    }
     // A topic with no messages in the bag (a typo) is said, with the topics it has.
     let (code, out, err) = echo_ours(&["--topic", "/ob"]);
     assert_eq!((code, out.as_str()), (2, ""), "{err}");
