@@ -538,7 +538,7 @@ impl GraphSpec {
         let raw: RawGraph = toml::from_str(text).map_err(|e| {
             let span = e.span().unwrap_or(0..0);
             let msg = e.message().lines().next().unwrap_or("invalid TOML").trim();
-            cx.err(span, msg.to_string())
+            cx.err(span, in_words(msg))
         })?;
         build::build(&cx, raw)
     }
@@ -1108,6 +1108,34 @@ impl fmt::Display for GraphSpec {
     }
 }
 
+/// A TOML reader's type error in a graph file's words, not Rust's: `expected f64` is
+/// `expected a number`, `expected i64` (or any integer type) `expected a whole number`, an
+/// integer past 64 bits (`` `1e23` as i128 ``) `(too large)`, `sequence` a list and `map` a
+/// table. Other messages are kept as they are.
+fn in_words(msg: &str) -> String {
+    let mut out = msg
+        .replace(" as i128", " (too large)")
+        .replace(" as u128", " (too large)");
+    for (rust, words) in [("sequence", "a list"), ("map", "a table")] {
+        out = out.replace(
+            &format!("invalid type: {rust},"),
+            &format!("invalid type: {words},"),
+        );
+    }
+    if let Some((head, ty)) = out.rsplit_once(", expected ") {
+        let words = match ty {
+            "f64" | "f32" => Some("a number"),
+            "i8" | "i16" | "i32" | "i64" | "i128" | "isize" => Some("a whole number"),
+            "u8" | "u16" | "u32" | "u64" | "u128" | "usize" => Some("a whole number, 0 or more"),
+            _ => None,
+        };
+        if let Some(words) = words {
+            return format!("{head}, expected {words}");
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1143,6 +1171,42 @@ name = "/action"
 type = "force"
 depth = 1
 "#;
+
+    /// A value of the wrong type is said in a graph file's words, at its place (it said
+    /// `expected f64`, `as i128`).
+    #[test]
+    fn a_value_of_the_wrong_type_is_said_in_words_not_rust_types() {
+        for (from, to, said) in [
+            (
+                "rate_hz = 50\nsubscribes = \"/action\"",
+                "rate_hz = \"fast\"\nsubscribes = \"/action\"",
+                "invalid type: string \"fast\", expected a number",
+            ),
+            (
+                "rate_hz = 50\nsubscribes = \"/action\"",
+                "rate_hz = 99999999999999999999999\nsubscribes = \"/action\"",
+                "invalid type: integer `99999999999999999999999` (too large), expected a number",
+            ),
+            (
+                "rate_hz = 50\nsubscribes = \"/action\"",
+                "rate_hz = [1]\nsubscribes = \"/action\"",
+                "invalid type: a list, expected a number",
+            ),
+            (
+                "type = \"state\"\ndepth = 1",
+                "type = \"state\"\ndepth = \"deep\"",
+                "invalid type: string \"deep\", expected a whole number",
+            ),
+        ] {
+            assert_eq!(CHAIN.matches(from).count(), 1, "{from}");
+            let e = parse(&CHAIN.replacen(from, to, 1)).unwrap_err().to_string();
+            assert!(e.contains(said), "{to}: {e}");
+            assert!(
+                !e.contains("f64") && !e.contains("i64") && !e.contains("i128"),
+                "{e}"
+            );
+        }
+    }
 
     #[test]
     fn the_default_graph_orders_sensor_policy_actuator() {
