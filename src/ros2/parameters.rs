@@ -7,7 +7,10 @@
 //! - each key of its `params` table (a nested table's keys joined by `.`, as ROS 2 names
 //!   nested parameters): numbers, booleans, strings, and arrays of one of them;
 //! - `use_sim_time` (`BOOL`), which every ROS 2 node has: `true`, since a ratelab node's
-//!   time is the run's, the time `/clock` carries.
+//!   time is the run's, the time `/clock` carries;
+//! - `start_type_description_service` (`BOOL`, read-only), which every Jazzy-and-later node
+//!   has (rclcpp's and rclpy's `TypeDescriptionService`): `true`, since every ratelab node
+//!   answers `~/get_type_description` ([`super::node_api`]).
 //!
 //! They are read-only over ROS 2, but one: `rate_hz`, which the lab's keys change, can be
 //! set where the run takes commands (the lab): a set is handed to the run as the key's
@@ -48,6 +51,12 @@ const SEPARATOR: char = '.';
 /// `--clock`, kept while the run is offered to ROS 2 (the lab's `c` restarts such a run
 /// under the other clock rather than switching it in place).
 pub const SIM_TIME_FIXED: &str = "ratelab's clock is chosen when the run starts (--clock); it cannot change mid-run, and the nodes' time is the run's, on /clock, under either clock";
+
+/// The parameter every ROS 2 node since Jazzy declares, read-only, for whether it offers
+/// `~/get_type_description` (rclpy's `type_description_service.py`, rclcpp's
+/// `node_type_descriptions.cpp`); real ros2cli's `param list` shows it on every node
+/// (kilted-ros2cli/step2/ros2cli/param-list.txt).
+const TYPE_DESCRIPTION_SERVICE: &str = "start_type_description_service";
 
 /// How deep a `params` table may nest before its deeper keys are left out of ROS 2's view.
 const MAX_NESTING: usize = 16;
@@ -179,6 +188,7 @@ impl NodeParameters {
         for (name, value) in [
             ("rate_hz", rate),
             ("use_sim_time", Value::Fixed(boolean(true))),
+            (TYPE_DESCRIPTION_SERVICE, Value::Fixed(boolean(true))),
         ] {
             if p.params.insert(name.into(), value).is_some() {
                 p.left_out.push(format!(
@@ -194,6 +204,7 @@ impl NodeParameters {
     pub fn clock_node(name: &str) -> NodeParameters {
         let mut params = BTreeMap::new();
         params.insert("use_sim_time".into(), Value::Fixed(boolean(false)));
+        params.insert(TYPE_DESCRIPTION_SERVICE.into(), Value::Fixed(boolean(true)));
         NodeParameters {
             node: format!("/{name}"),
             params,
@@ -257,11 +268,18 @@ impl NodeParameters {
                 vec![],
             ),
             "use_sim_time" => ("the node's time is the run's, which /clock carries", vec![]),
+            // rclpy's descriptor, word for word.
+            TYPE_DESCRIPTION_SERVICE => (
+                "If enabled, start the ~/get_type_description service.",
+                vec![],
+            ),
             _ => ("the graph file's params", vec![]),
         };
         let settable = name == "rate_hz" && self.set_rate.is_some();
         let constraints = if settable {
             "set as the lab's rate keys set it: a command to the run, in its session log".into()
+        } else if name == TYPE_DESCRIPTION_SERVICE {
+            String::new()
         } else if name == "use_sim_time" {
             format!("read-only: {SIM_TIME_FIXED}")
         } else {
@@ -392,6 +410,10 @@ impl NodeParameters {
                 "{}: parameter 'use_sim_time' is read-only: {SIM_TIME_FIXED}",
                 self.node
             ),
+            // rclcpp's words for any read-only parameter (param-set-ro.txt).
+            TYPE_DESCRIPTION_SERVICE if self.params.contains_key(name) => {
+                format!("Trying to set a read-only parameter: {name}.")
+            }
             _ if self.params.contains_key(name) => format!(
                 "{}: parameter '{name}' is read-only (it is the graph file's)",
                 self.node
@@ -595,10 +617,37 @@ mod tests {
             })
         };
         let all = list(&[], 0);
-        assert_eq!(all.names, ["a", "b.c", "b.d.e", "rate_hz", "use_sim_time"]);
+        assert_eq!(
+            all.names,
+            [
+                "a",
+                "b.c",
+                "b.d.e",
+                "rate_hz",
+                "start_type_description_service",
+                "use_sim_time"
+            ]
+        );
         assert_eq!(all.prefixes, ["b", "b.d"]);
-        assert_eq!(list(&[], 1).names, ["a", "rate_hz", "use_sim_time"]);
-        assert_eq!(list(&[], 2).names, ["a", "b.c", "rate_hz", "use_sim_time"]);
+        assert_eq!(
+            list(&[], 1).names,
+            [
+                "a",
+                "rate_hz",
+                "start_type_description_service",
+                "use_sim_time"
+            ]
+        );
+        assert_eq!(
+            list(&[], 2).names,
+            [
+                "a",
+                "b.c",
+                "rate_hz",
+                "start_type_description_service",
+                "use_sim_time"
+            ]
+        );
         assert_eq!(list(&["b"], 0).names, ["b.c", "b.d.e"]);
         // The depth below the prefix (rclcpp #2300, Jazzy and later).
         assert_eq!(list(&["b"], 1).names, ["b.c"]);

@@ -299,7 +299,7 @@ fn ros_2s_tools_see_the_graph_its_types_messages_and_clock_and_the_results_do_no
     );
     assert_eq!(
         event("/ratelab")["new"],
-        serde_json::json!({"use_sim_time": [1, false]})
+        serde_json::json!({"start_type_description_service": [1, true], "use_sim_time": [1, false]})
     );
     // Every type's hash is rosbags' hash_rihs01 of it (rcl_interfaces' Log and
     // ParameterEvent too).
@@ -734,8 +734,14 @@ fn a_bag_of_the_run_reads_back_with_rosbags_every_message_the_same_on_every_run(
         declared.values().all(|(stamp, _)| *stamp == 0),
         "{declared:?}"
     );
-    assert_eq!(declared["/policy"].1, ["rate_hz", "use_sim_time"]);
-    assert_eq!(declared["/ratelab"].1, ["use_sim_time"]);
+    assert_eq!(
+        declared["/policy"].1,
+        ["rate_hz", "start_type_description_service", "use_sim_time"]
+    );
+    assert_eq!(
+        declared["/ratelab"].1,
+        ["start_type_description_service", "use_sim_time"]
+    );
     // Each topic's offered QoS is the one ratelab ran it with (`ros2 bag play` offers it).
     let qos = |t: &str| r["qos"][t].to_string();
     let inf = "9223372036,854775807";

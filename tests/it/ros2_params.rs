@@ -139,14 +139,14 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
         listed,
         (
             0,
-            "  gain\n  mode\n  on\n  rate_hz\n  use_sim_time\n  window\n".into(),
+            "  gain\n  mode\n  on\n  rate_hz\n  start_type_description_service\n  use_sim_time\n  window\n".into(),
             String::new()
         )
     );
     assert_eq!(got.1, "Integer values are: [1, 2, 3]\n", "{got:?}");
     assert!(
         all.1
-            .contains("/policy:\n  rate_hz\n  use_sim_time\n/ratelab:\n  use_sim_time\n"),
+            .contains("/policy:\n  rate_hz\n  start_type_description_service\n  use_sim_time\n/ratelab:\n  start_type_description_service\n  use_sim_time\n"),
         "{all:?}"
     );
     // As real ros2cli said them (kilted-ros2cli/step2/ros2cli): its words alone on stderr,
@@ -185,7 +185,15 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
     let chatty = &r["nodes"]["chatty"];
     assert_eq!(
         chatty["names"],
-        json!(["gain", "mode", "on", "rate_hz", "use_sim_time", "window"]),
+        json!([
+            "gain",
+            "mode",
+            "on",
+            "rate_hz",
+            "start_type_description_service",
+            "use_sim_time",
+            "window"
+        ]),
         "{r}"
     );
     assert_eq!(chatty["prefixes"], json!([]));
@@ -193,17 +201,18 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
         chatty["values"],
         json!({
             "gain": [3, 2.5], "mode": [4, "calm"], "on": [1, true],
-            "rate_hz": [3, 10.0], "use_sim_time": [1, true], "window": [7, [1, 2, 3]],
+            "rate_hz": [3, 10.0], "start_type_description_service": [1, true], "use_sim_time": [1, true],
+            "window": [7, [1, 2, 3]],
         })
     );
-    assert_eq!(chatty["types"], json!([3, 4, 1, 3, 1, 7]));
+    assert_eq!(chatty["types"], json!([3, 4, 1, 3, 1, 1, 7]));
     // An undeclared name among them: no types at all (rclcpp and rclpy).
     assert_eq!(chatty["types_with_undeclared"], json!([]));
     assert_eq!(chatty["described"]["name"], "gain");
     assert_eq!(chatty["described"]["read_only"], true);
     // Every set refused, each with its reason.
     let set = chatty["set"].as_array().unwrap();
-    assert_eq!(set.len(), 7);
+    assert_eq!(set.len(), 8);
     assert!(set.iter().all(|s| s["successful"] == false), "{set:?}");
     let reason = |i: usize| set[i]["reason"].as_str().unwrap();
     assert!(reason(0).contains("'gain' is read-only"), "{}", reason(0));
@@ -212,7 +221,12 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
         "{}",
         reason(3)
     );
-    assert!(reason(6).contains("is not declared"), "{}", reason(6));
+    // rclcpp's words for the parameter every node since Jazzy has (param-set-ro.txt).
+    assert_eq!(
+        reason(4),
+        "Trying to set a read-only parameter: start_type_description_service."
+    );
+    assert!(reason(7).contains("is not declared"), "{}", reason(7));
     // Each reply carried the request's sequence number and the client's GID.
     for node in ["chatty", "policy", "ratelab"] {
         assert_eq!(r["nodes"][node]["attachments_ok"], true, "{node}: {r}");
@@ -220,7 +234,7 @@ fn ros2_param_answers_from_the_graph_file_and_the_log_reaches_rosout() {
     assert_eq!(r["nodes"]["policy"]["values"]["rate_hz"], json!([3, 50.0]));
     assert_eq!(
         r["nodes"]["ratelab"]["values"],
-        json!({"use_sim_time": [1, false]})
+        json!({"start_type_description_service": [1, true], "use_sim_time": [1, false]})
     );
     // The node's prints, on /rosout as its log (INFO, named for it).
     let heard: Vec<&Value> = r["rosout"]
