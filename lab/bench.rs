@@ -161,10 +161,11 @@ pub fn scrub_bench(seeks: usize) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// One table row: a node's tick timing at `hz`, CPU as a share of `wall`.
-fn print_row(hz: f64, t: &NodeTiming, wall: Duration) {
+/// One table row: a node's tick timing at `hz`, CPU as a share of `wall`, its name in a
+/// column `name_w` characters wide (the longest name's).
+fn print_row(hz: f64, t: &NodeTiming, wall: Duration, name_w: usize) {
     println!(
-        "{:>8}  {:<10} {:>7} {:>9.1} {:>9.1} {:>9.1} {:>9.2} {:>8}  {}",
+        "{:>8}  {:<name_w$} {:>7} {:>9.1} {:>9.1} {:>9.1} {:>9.2} {:>8}  {}",
         hz,
         t.node,
         t.ticks,
@@ -255,8 +256,14 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
         },
         ratelab::sweep_spec::threads()
     );
+    // The node column as wide as the longest name (the bare wait's, 9, at least 10).
+    let name_w = (base.graph.nodes.iter())
+        .map(|n| n.name.chars().count())
+        .max()
+        .unwrap_or(0)
+        .max(10);
     println!(
-        "{:>8}  {:<10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>8}  policy",
+        "{:>8}  {:<name_w$} {:>7} {:>9} {:>9} {:>9} {:>9} {:>8}  policy",
         "rate Hz", "node", "ticks", "p50 µs", "p99 µs", "max µs", "cpu %", "skipped"
     );
     for &hz in &a.hz {
@@ -276,7 +283,7 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
             },
         );
         for t in &floor.timing {
-            print_row(hz, t, Duration::from_nanos(duration.0));
+            print_row(hz, t, Duration::from_nanos(duration.0), name_w);
         }
         // Every node at `hz`, the actuator too: a timing run, not a physical one (the
         // plant still steps 20 ms per actuator tick), so the graph file's 50 Hz rule for
@@ -299,7 +306,7 @@ pub fn run_bench(a: &BenchArgs, stop: StopFlag) -> anyhow::Result<()> {
         };
         let report = run(&cfg, Box::new(Scripted), opts)?;
         for t in report.metrics.node_timing.iter().flatten() {
-            print_row(hz, t, report.wall);
+            print_row(hz, t, report.wall, name_w);
         }
         if let Some(w) = report.metrics.sched_warning() {
             eprintln!("[ratelab] warning: {w}");
