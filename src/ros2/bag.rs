@@ -194,10 +194,11 @@ pub struct Bag {
 
 /// How long, in wall time, a message may wait in the MCAP writer's open chunk before the
 /// chunk is closed and written to the file: what a run killed outright (SIGKILL, the OOM
-/// killer) loses of its bag at most. The `mcap` crate writes a chunk only when it reaches
-/// its size (1 MiB, hours of the chapter's topics), so a killed run's bag held no message
-/// at all. Closing a chunk is `mcap::Writer::flush`, which leaves the file readable up to
-/// there (the MCAP specification's "chunk" records; Foxglove's writers flush so too).
+/// killer) loses of its bag at most, a second of wall time (under the virtual clock, that
+/// may be many seconds of run time). The `mcap` crate writes a chunk only when it holds
+/// 1 MiB of records (95 s of the chapter's run: 11 kB of records a second), so a run killed
+/// before then kept no message at all, and a longer one lost up to its last 95 s. Closing
+/// a chunk is `mcap::Writer::flush`, which leaves the file readable up to there.
 pub const FLUSH_PERIOD: std::time::Duration = std::time::Duration::from_secs(1);
 
 fn io(what: &Path, e: impl std::fmt::Display) -> Ros2Error {
@@ -439,11 +440,21 @@ impl Bag {
         t.count += 1;
         self.first_ns.get_or_insert(t_ns);
         self.last_ns = self.last_ns.max(t_ns);
-        if self.flushed.elapsed() >= FLUSH_PERIOD {
-            self.writer.flush().map_err(|e| e.to_string())?;
-            self.flushed = std::time::Instant::now();
-        }
+        self.flush_if_due();
         Ok(())
+    }
+
+    /// Close the open chunk and write it to the file when [`FLUSH_PERIOD`] has passed since
+    /// the last time: after each message, and from the bridge's loop while none comes (a
+    /// run that stalls). A flush that fails is kept for [`Bag::finish`], as a write's is.
+    pub fn flush_if_due(&mut self) {
+        if self.failed.is_some() || self.flushed.elapsed() < FLUSH_PERIOD {
+            return;
+        }
+        self.flushed = std::time::Instant::now();
+        if let Err(e) = self.writer.flush() {
+            self.failed = Some(e.to_string());
+        }
     }
 
     /// Finish the MCAP file and write `metadata.yaml`. Returns the messages written.

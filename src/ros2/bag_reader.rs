@@ -422,9 +422,20 @@ impl Walk<'_, '_> {
                 Ok(r) => r,
                 // A record longer than the whole file: every record before it was read
                 // whole, so the file stops inside this one, as a bag cut short does (a
-                // writer killed inside a chunk leaves its length unwritten, 2^64 − 1;
-                // a file cut inside a chunk leaves one longer than what is left of it).
-                // Read as far as it goes, and said; nothing is held for the length.
+                // writer killed inside a chunk leaves the chunk's length unwritten,
+                // 2^64 − 1; a file cut inside a record leaves one longer than what is
+                // left of it). Read as far as it goes, and said; nothing is held for the
+                // length. But a file that ends in MCAP's closing magic was not cut, and no
+                // writer leaves another record's length unwritten: a lie, refused.
+                Err(mcap::McapError::RecordTooLarge { opcode, len })
+                    if self.bag.bytes.ends_with(mcap::MAGIC)
+                        || (len == u64::MAX && opcode != mcap::records::op::CHUNK) =>
+                {
+                    return Err(format!(
+                        "a record (opcode {opcode:#04x}) declares {len} bytes, more than the whole file holds ({}): a damaged or hostile bag",
+                        self.bag.bytes.len()
+                    ))
+                }
                 Err(mcap::McapError::RecordTooLarge { opcode, len }) => {
                     let what = if opcode == mcap::records::op::CHUNK && len == u64::MAX {
                         "a chunk its writer never finished".to_string()

@@ -908,6 +908,10 @@ fn forward(
     let mut log_rx = logs.clone();
     loop {
         f.poll_rates();
+        // A run that stalls still puts what its bag holds in the file within a second.
+        if let Some(b) = f.bag.as_mut() {
+            b.flush_if_due();
+        }
         crossbeam_channel::select! {
             recv(rx) -> out => match out {
                 Ok(Out::End) | Err(_) => break,

@@ -284,13 +284,8 @@ fn hand_made_bags_read_so_the_refusals_below_mean_something() {
     // A record longer than the whole file is the file's last (every one before it was
     // read whole): the file stops inside it, as one cut short does. Read as far as it
     // goes, said, and nothing held for the length (the reader's address space is bound):
-    // a 64-byte file whose first record claims 2^64 - 1 bytes, a chunk of a writer that
-    // was killed (its length never written), and a bag cut inside a chunk whose length
-    // is more than the cut file holds.
-    let mut huge = MAGIC.to_vec();
-    huge.push(0x01);
-    huge.extend_from_slice(&u64::MAX.to_le_bytes());
-    huge.resize(64, 0);
+    // a chunk of a writer that was killed (its length never written), and a bag cut
+    // inside a chunk whose length is more than the cut file holds.
     let start = [MAGIC.to_vec(), header()].concat();
     let mut unfinished = start.clone();
     unfinished.push(0x06);
@@ -299,11 +294,6 @@ fn hand_made_bags_read_so_the_refusals_below_mean_something() {
     let mut cut_chunk = file(&chunk(&declared_message("/x"), "", None));
     cut_chunk.truncate(start.len() + 40);
     for (what, bytes, said) in [
-        (
-            "huge",
-            huge,
-            "inside a record (opcode 0x01) of 18446744073709551615 bytes where the file holds 64",
-        ),
         (
             "unfinished",
             unfinished,
@@ -330,6 +320,20 @@ fn bags_whose_lengths_and_chunks_lie_are_refused_in_one_line() {
     // Many short processes (and a 64 MiB compression): never beside a timed test.
     let _m = crate::machine::shared();
     let msg = declared_message("/x");
+    // A 64-byte file whose first record claims 2^64 - 1 bytes: no writer leaves a length
+    // unwritten but a chunk's, so a lie, not a file cut short.
+    let mut huge = MAGIC.to_vec();
+    huge.push(0x01);
+    huge.extend_from_slice(&u64::MAX.to_le_bytes());
+    huge.resize(64, 0);
+    assert_bag_refused(bag(&huge).path(), "more than the whole file holds");
+    // A whole file (it ends in MCAP's closing magic) with a chunk longer than the file:
+    // damaged, not cut short.
+    let mut lying = file(&chunk(&msg, "", None));
+    let at = MAGIC.len() + header().len() + 1;
+    assert_eq!(lying[at - 1], 0x06);
+    lying[at..at + 8].copy_from_slice(&(1u64 << 20).to_le_bytes());
+    assert_bag_refused(bag(&lying).path(), "more than the whole file holds");
     // A chunk claiming 100 bytes whose zstd data inflates to 64 MiB of records.
     let bomb = {
         let mut records = message(1, 0, &vec![0u8; 64 << 20]);
