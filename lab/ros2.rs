@@ -406,6 +406,9 @@ fn warn(w: &str) {
 /// `echo`, `hz` or `bw`, a topic no node has to `echo`); `echo`, `hz` or `bw` stopped by
 /// Ctrl-C as [`Interrupted`], with ros2cli's exit code.
 pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
+    if let Ros2Command::Bag(verb @ (BagVerb::Record { .. } | BagVerb::Play { .. })) = &args.what {
+        return bag(verb, &stop);
+    }
     if let Ros2Command::Bag(verb) = &args.what {
         // A bag is read from its files: the graph's settings would change nothing.
         let given = [
@@ -756,13 +759,13 @@ fn time_limit(s: &str) -> Result<Duration, String> {
     seconds_in(s, (false, 1e6))
 }
 
+/// How long a verb waits for the graph's liveliness tokens when `--wait` is not given.
+const DEFAULT_WAIT: Duration = Duration::from_secs(1);
+
 /// `--wait S`: seconds in [0, 3600], as [`time_limit`].
 ///
 /// # Errors
 /// One line when `S` is not a number or not in the range.
-/// How long a verb waits for the graph's liveliness tokens when `--wait` is not given.
-const DEFAULT_WAIT: Duration = Duration::from_secs(1);
-
 fn wait_s(s: &str) -> Result<Duration, String> {
     seconds_in(s, (true, 3600.0))
 }

@@ -894,6 +894,8 @@ mod tests {
             v.starts_with("Type: std_msgs/msg/String\n\nPublisher count: 1\n\nNode name: talker\n"),
             "{v}"
         );
+        // To the empty line after the last endpoint, as ros2cli ends it.
+        assert!(v.ends_with("Infinite\n\n"), "{v}");
         for needle in [
             "Node name: talker\nNode namespace: /\nTopic type: std_msgs/msg/String\n",
             "Endpoint type: PUBLISHER\nQoS profile:\n  Reliability: RELIABLE\n  History (Depth): KEEP_LAST (10)\n",
