@@ -192,7 +192,7 @@ pub enum ExerciseError {
     Unknown(String),
     /// The learner's file has no prediction yet, or lacks part of it (`missing`: a key, or
     /// a `why` that says something).
-    #[error("{}", no_prediction(path, keys, missing))]
+    #[error("{}", no_prediction(path, keys, missing, *none))]
     NoPrediction {
         /// The learner's file.
         path: String,
@@ -200,6 +200,8 @@ pub enum ExerciseError {
         keys: String,
         /// Those it lacks, `why` among them when it is missing or blank.
         missing: Vec<String>,
+        /// It lacks all of them: the prediction is not begun.
+        none: bool,
     },
     /// A prediction given in place of the learner's file's (Python's `prediction=`) that
     /// lacks a key the exercise asks for, or holds one it does not.
@@ -456,8 +458,9 @@ impl ExerciseFile {
 
     /// The prediction beside the outcome, one sentence per predicted key, in words, each
     /// graded: "You predicted the pole first fails at 10 Hz; it first fell at 5 Hz." (missed),
-    /// "…; it first fell at 5 Hz: right.". A key the learner left out, or gave in another
-    /// type, is said so ([`Verdict::Unreadable`]).
+    /// "…; it first fell at 5 Hz: right.". A key given in another type is said so
+    /// ([`Verdict::Unreadable`]); one left out is too, though [`run_report`] refuses such a
+    /// prediction before any run ([`ExerciseError::NoPrediction`]).
     pub fn reconcile(&self, outcome: &impl Reconcile) -> Vec<Said> {
         outcome.reconcile(&self.prediction)
     }
@@ -824,13 +827,10 @@ pub fn run(
     run_report(which, setup, out, progress).map(|r| r.not_passed)
 }
 
-/// What `prediction` lacks of what an exercise asks for: each `required` key not there, then
-/// `why` when it is not a string that says something. Empty: the prediction is filled in.
 /// [`ExerciseError::NoPrediction`]'s line: the whole prediction asked for when the file has
-/// none of it; else the part it lacks, by name.
-fn no_prediction(path: &str, keys: &str, missing: &[String]) -> String {
-    let all = keys.split(", ").filter(|k| !k.is_empty()).count() + 1;
-    if missing.len() >= all {
+/// none of it (`none`); else the part it lacks, by name.
+fn no_prediction(path: &str, keys: &str, missing: &[String], none: bool) -> String {
+    if none {
         return format!(
             "{path} has no prediction yet: fill in [prediction] ({keys} and why) first — predicting is the exercise"
         );
@@ -850,6 +850,8 @@ fn no_prediction(path: &str, keys: &str, missing: &[String]) -> String {
     )
 }
 
+/// What `prediction` lacks of what an exercise asks for: each `required` key not there, then
+/// `why` when it is not a string that says something. Empty: the prediction is filled in.
 fn missing_from<'a>(required: &[&'a str], prediction: &toml::Table) -> Vec<&'a str> {
     let said_why =
         (prediction.get("why").and_then(toml::Value::as_str)).is_some_and(|w| !w.trim().is_empty());
@@ -915,6 +917,8 @@ pub fn run_report(
         return Err(ExerciseError::NoPrediction {
             path: path.display().to_string(),
             keys: exercise.required_keys().join(", "),
+            // Every key and the why.
+            none: missing.len() > exercise.required_keys().len(),
             missing: missing.into_iter().map(str::to_string).collect(),
         });
     }

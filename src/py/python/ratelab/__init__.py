@@ -121,8 +121,9 @@ class SettingTypeError(Error, TypeError):
 
 
 class NoPrediction(Error, ValueError):
-    """An exercise asked for before its prediction was written (`ratelab exercise` refuses it
-    too): the message names the learner's file and the keys it asks for."""
+    """An exercise asked for before its prediction was written, or with part of it left out
+    (`ratelab exercise` refuses it too): the message names the learner's file and what the
+    prediction lacks (every key it asks for, when it has none of them)."""
 
 
 class RunInProgress(Error, RuntimeError):
@@ -1223,7 +1224,7 @@ class Check:
 class Prediction:
     """One key of the learner's prediction beside the outcome: the key, the sentence saying
     both ("You predicted the pole first fails at 10 Hz; it first fell at 5 Hz."), and the
-    verdict: "right", "missed", "unreadable" (missing, or not of its type) or "open" (not
+    verdict: "right", "missed", "unreadable" (not of the type the exercise reads) or "open" (not
     graded: the outcome left the key moot)."""
 
     key: str
