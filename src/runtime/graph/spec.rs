@@ -1109,24 +1109,36 @@ impl fmt::Display for GraphSpec {
 }
 
 /// A TOML reader's type error in a graph file's words, not Rust's: `expected f64` is
-/// `expected a number`, `expected i64` (or any integer type) `expected a whole number`, an
-/// integer past 64 bits (`` `1e23` as i128 ``) `(too large)`, `sequence` a list and `map` a
-/// table. Other messages are kept as they are.
+/// `expected a number`, `expected i64` (or any integer type) `expected a whole number`,
+/// `expected a sequence` `expected a list`, `expected a map` or `expected struct …`
+/// `expected a table`; an integer past 64 bits (`` `1e23` as i128 ``) is `(too large)`, and
+/// a `sequence` or `map` given is a list or a table. Only serde's own words are touched
+/// (anchored to the backtick, comma or end around them), never a value quoted in the message.
 fn in_words(msg: &str) -> String {
-    let mut out = msg
-        .replace(" as i128", " (too large)")
-        .replace(" as u128", " (too large)");
+    // serde's own words open the message ("invalid type: integer `N` as i128, expected …",
+    // "invalid type: sequence, expected …"): only there are they rewritten.
+    let mut out = msg.to_string();
+    if let Some(rest) = msg.strip_prefix("invalid type: integer `") {
+        let digits = rest.find('`').map_or("", |end| &rest[..end]);
+        for wide in ["i128", "u128"] {
+            if let Some(tail) = rest.strip_prefix(&format!("{digits}` as {wide},")) {
+                out = format!("invalid type: integer `{digits}` (too large),{tail}");
+            }
+        }
+    }
     for (rust, words) in [("sequence", "a list"), ("map", "a table")] {
-        out = out.replace(
-            &format!("invalid type: {rust},"),
-            &format!("invalid type: {words},"),
-        );
+        if let Some(tail) = out.strip_prefix(&format!("invalid type: {rust},")) {
+            out = format!("invalid type: {words},{tail}");
+        }
     }
     if let Some((head, ty)) = out.rsplit_once(", expected ") {
         let words = match ty {
             "f64" | "f32" => Some("a number"),
             "i8" | "i16" | "i32" | "i64" | "i128" | "isize" => Some("a whole number"),
             "u8" | "u16" | "u32" | "u64" | "u128" | "usize" => Some("a whole number, 0 or more"),
+            "a sequence" => Some("a list ([[node]] and [[topic]] are lists of tables)"),
+            "a map" => Some("a table"),
+            t if t.starts_with("struct ") => Some("a table"),
             _ => None,
         };
         if let Some(words) = words {
@@ -1206,6 +1218,19 @@ depth = 1
                 "{e}"
             );
         }
+        // `[node]` where `[[node]]` makes a list of them.
+        let e = parse("name = \"t\"\n[node]\nname = \"a\"\nkind = \"actuator\"\nrate_hz = 50\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("invalid type: a table, expected a list ([[node]] and [[topic]] are lists of tables)"),
+            "{e}"
+        );
+        // A value quoted in a message is never rewritten.
+        assert_eq!(
+            in_words("unknown node ` as i128, x`"),
+            "unknown node ` as i128, x`"
+        );
     }
 
     #[test]
