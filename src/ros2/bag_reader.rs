@@ -399,11 +399,12 @@ struct Walk<'b, 's> {
     stop: &'s dyn Fn() -> bool,
 }
 
-/// What a record tells the walk: go on, or stop there (`each` asked to, or the data
-/// section ended).
+/// What a record tells the walk: go on, or stop there (`each` asked to: `Done`; the data
+/// section ended: `End`).
 enum Flow {
     Go,
     Done,
+    End,
 }
 
 impl Walk<'_, '_> {
@@ -474,12 +475,18 @@ impl Walk<'_, '_> {
                         return Ok(Some(format!("stopped after {} messages", self.count)));
                     }
                     let inner = inner.map_err(|e| format!("a chunk's records do not read: {e}"))?;
-                    if let Flow::Done = self.take(inner, each)? {
-                        return Ok(None);
+                    match self.take(inner, each)? {
+                        Flow::Go => {}
+                        Flow::Done => return Ok(None),
+                        Flow::End => return Ok(self.after_data()),
                     }
                 }
-            } else if let Flow::Done = self.take(record, each)? {
-                return Ok(None);
+            } else {
+                match self.take(record, each)? {
+                    Flow::Go => {}
+                    Flow::Done => return Ok(None),
+                    Flow::End => return Ok(self.after_data()),
+                }
             }
         }
         // Records ran out at a record's end, before the data section's end: the file stops
@@ -488,6 +495,18 @@ impl Walk<'_, '_> {
             "the bag stops short after {} messages (its data section has no end): cut short?",
             self.count
         )))
+    }
+
+    /// The note once the data section has ended: none for a whole file (it ends in MCAP's
+    /// closing magic); else every message was read, but the summary after them is cut
+    /// short (a file cut after its data, or a writer stopped while writing its summary).
+    fn after_data(&self) -> Option<String> {
+        (!self.bag.bytes.ends_with(mcap::MAGIC)).then(|| {
+            format!(
+                "the bag's data is whole ({} read) but its summary stops short: cut short?",
+                ratelab_core::metrics::counted(self.count, "message")
+            )
+        })
     }
 
     /// One record outside a chunk or inside one.
@@ -545,7 +564,7 @@ impl Walk<'_, '_> {
             }
             // The data section ends here (a footer, where a writer wrote no data end); the
             // summary repeats what it declared.
-            Record::DataEnd(_) | Record::Footer(_) => return Ok(Flow::Done),
+            Record::DataEnd(_) | Record::Footer(_) => return Ok(Flow::End),
             _ => {}
         }
         Ok(Flow::Go)

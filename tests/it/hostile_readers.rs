@@ -281,6 +281,23 @@ fn hand_made_bags_read_so_the_refusals_below_mean_something() {
     );
     assert_eq!(o.code, Some(0), "{o:?}");
     assert!(o.stdout.contains("cut short?"), "{o:?}");
+    // Cut after its data, inside its summary (here: its closing magic): every message is
+    // read, and the summary's loss said (nothing was said).
+    let mut summary_cut = file(&declared_message("/x"));
+    summary_cut.truncate(summary_cut.len() - 4);
+    let d = bag(&summary_cut);
+    let o = limited(
+        &["ros2", "bag", "info", d.path().to_str().unwrap()],
+        WITHIN,
+        |_| {},
+    );
+    assert_eq!(o.code, Some(0), "{o:?}");
+    assert!(
+        o.stdout.contains("Count: 1 ")
+            && o.stdout
+                .contains("the bag's data is whole (1 message read) but its summary stops short"),
+        "{o:?}"
+    );
     // A record longer than the whole file is the file's last (every one before it was
     // read whole): the file stops inside it, as one cut short does. Read as far as it
     // goes, said, and nothing held for the length (the reader's address space is bound):
