@@ -406,17 +406,16 @@ fn warn(w: &str) {
 /// `echo`, `hz` or `bw`, a topic no node has to `echo`); `echo`, `hz` or `bw` stopped by
 /// Ctrl-C as [`Interrupted`], with ros2cli's exit code.
 pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
-    if let Ros2Command::Bag(verb @ (BagVerb::Record { .. } | BagVerb::Play { .. })) = &args.what {
-        return bag(verb, &stop);
-    }
     if let Ros2Command::Bag(verb) = &args.what {
-        // A bag is read from its files: the graph's settings would change nothing.
+        // A bag is read from its files: the graph's settings would change nothing (record
+        // and play are refused for what they are first).
         let given = [
             ("--domain", args.domain.is_some()),
             ("--connect", args.connect.is_some()),
             ("--wait", args.wait.is_some()),
         ];
-        if let Some((flag, _)) = given.iter().find(|(_, given)| *given) {
+        let reads = !matches!(verb, BagVerb::Record { .. } | BagVerb::Play { .. });
+        if let Some((flag, _)) = given.iter().find(|(_, given)| *given && reads) {
             anyhow::bail!("{flag}: `ros2 bag` reads the bag's files, not a graph, so it takes no graph settings");
         }
         return bag(verb, &stop);

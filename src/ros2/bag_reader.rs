@@ -475,18 +475,12 @@ impl Walk<'_, '_> {
                         return Ok(Some(format!("stopped after {} messages", self.count)));
                     }
                     let inner = inner.map_err(|e| format!("a chunk's records do not read: {e}"))?;
-                    match self.take(inner, each)? {
-                        Flow::Go => {}
-                        Flow::Done => return Ok(None),
-                        Flow::End => return Ok(self.after_data()),
+                    if let Some(ended) = self.step(inner, each)? {
+                        return Ok(ended);
                     }
                 }
-            } else {
-                match self.take(record, each)? {
-                    Flow::Go => {}
-                    Flow::Done => return Ok(None),
-                    Flow::End => return Ok(self.after_data()),
-                }
+            } else if let Some(ended) = self.step(record, each)? {
+                return Ok(ended);
             }
         }
         // Records ran out at a record's end, before the data section's end: the file stops
@@ -497,15 +491,28 @@ impl Walk<'_, '_> {
         )))
     }
 
-    /// The note once the data section has ended: none for a whole file (it ends in MCAP's
-    /// closing magic); else every message was read, but the summary after them is cut
-    /// short (a file cut after its data, or a writer stopped while writing its summary).
-    fn after_data(&self) -> Option<String> {
-        (!self.bag.bytes.ends_with(mcap::MAGIC)).then(|| {
-            format!(
-                "the bag's data is whole ({} read) but its summary stops short: cut short?",
-                ratelab_core::metrics::counted(self.count, "message")
-            )
+    /// [`Walk::take`] `record`, and where that ends the walk, what [`Walk::file`] returns: no
+    /// note when `each` asked to stop; when the data section ended, none for a whole file
+    /// (it ends in MCAP's closing magic), else that every message was read but the summary
+    /// after them is cut short (a file cut after its data, or a writer stopped while
+    /// writing its summary).
+    ///
+    /// # Errors
+    /// [`Walk::take`]'s.
+    fn step(
+        &mut self,
+        record: mcap::records::Record<'_>,
+        each: &mut Each<'_>,
+    ) -> Result<Option<Option<String>>, String> {
+        Ok(match self.take(record, each)? {
+            Flow::Go => None,
+            Flow::Done => Some(None),
+            Flow::End => Some((!self.bag.bytes.ends_with(mcap::MAGIC)).then(|| {
+                format!(
+                    "the bag's data is whole ({} read) but its summary stops short: cut short?",
+                    ratelab_core::metrics::counted(self.count, "message")
+                )
+            })),
         })
     }
 

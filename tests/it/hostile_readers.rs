@@ -38,6 +38,15 @@ fn limited(args: &[&str], timeout: Duration, during: impl FnOnce(libc::pid_t)) -
     limited_with(args, &[], AS_LIMIT, timeout, during)
 }
 
+/// `ratelab ros2 bag VERB DIR` under [`limited`]'s bounds, within [`WITHIN`].
+fn read_bag(verb: &str, dir: &Path) -> Ended {
+    limited(
+        &["ros2", "bag", verb, dir.to_str().unwrap()],
+        WITHIN,
+        |_| {},
+    )
+}
+
 /// [`limited`] with environment `env` and address-space limit `as_bytes` (bytes).
 pub(crate) fn limited_with(
     args: &[&str],
@@ -248,22 +257,14 @@ fn hand_made_bags_read_so_the_refusals_below_mean_something() {
     let zstd = file(&chunk(&declared_message("/x"), "zstd", None));
     for (what, bytes) in [("plain", plain), ("chunked", chunked), ("zstd", zstd)] {
         let d = bag(&bytes);
-        let o = limited(
-            &["ros2", "bag", "info", d.path().to_str().unwrap()],
-            WITHIN,
-            |_| {},
-        );
+        let o = read_bag("info", d.path());
         assert_eq!(o.code, Some(0), "{what}: {o:?}");
         assert!(
             o.stdout
                 .contains("Topic: /x | Type: std_msgs/msg/Float64 | Count: 1"),
             "{what}: {o:?}"
         );
-        let o = limited(
-            &["ros2", "bag", "echo", d.path().to_str().unwrap()],
-            WITHIN,
-            |_| {},
-        );
+        let o = read_bag("echo", d.path());
         assert_eq!(o.code, Some(0), "{what}: {o:?}");
         assert!(
             o.stdout.starts_with("# /x at 0.020000000 s\n"),
@@ -274,11 +275,7 @@ fn hand_made_bags_read_so_the_refusals_below_mean_something() {
     let mut cut = file(&declared_message("/x"));
     cut.truncate(cut.len() - 60);
     let d = bag(&cut);
-    let o = limited(
-        &["ros2", "bag", "info", d.path().to_str().unwrap()],
-        WITHIN,
-        |_| {},
-    );
+    let o = read_bag("info", d.path());
     assert_eq!(o.code, Some(0), "{o:?}");
     assert!(o.stdout.contains("cut short?"), "{o:?}");
     // Cut after its data, inside its summary (here: its closing magic): every message is
@@ -286,11 +283,7 @@ fn hand_made_bags_read_so_the_refusals_below_mean_something() {
     let mut summary_cut = file(&declared_message("/x"));
     summary_cut.truncate(summary_cut.len() - 4);
     let d = bag(&summary_cut);
-    let o = limited(
-        &["ros2", "bag", "info", d.path().to_str().unwrap()],
-        WITHIN,
-        |_| {},
-    );
+    let o = read_bag("info", d.path());
     assert_eq!(o.code, Some(0), "{o:?}");
     assert!(
         o.stdout.contains("Count: 1 ")
@@ -319,11 +312,7 @@ fn hand_made_bags_read_so_the_refusals_below_mean_something() {
         ("cut chunk", cut_chunk, "inside a record (opcode 0x06)"),
     ] {
         let d = bag(&bytes);
-        let o = limited(
-            &["ros2", "bag", "info", d.path().to_str().unwrap()],
-            WITHIN,
-            |_| {},
-        );
+        let o = read_bag("info", d.path());
         assert_eq!(o.code, Some(0), "{what}: {o:?}");
         assert!(
             o.stdout.contains("stops short after 0 messages") && o.stdout.contains(said),
@@ -427,11 +416,7 @@ fn metadata_nested_past_its_bound_is_refused_before_it_is_parsed() {
     // At the bound it is the parser's to judge: it answers at once.
     let at = format!("{}{}", "[".repeat(64), "]".repeat(64));
     std::fs::write(d.path().join("metadata.yaml"), at).unwrap();
-    let o = limited(
-        &["ros2", "bag", "info", d.path().to_str().unwrap()],
-        WITHIN,
-        |_| {},
-    );
+    let o = read_bag("info", d.path());
     assert!(o.wall < WITHIN, "{o:?}");
     assert!(o.code == Some(0) || o.code == Some(2), "{o:?}");
 }

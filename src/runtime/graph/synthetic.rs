@@ -76,22 +76,22 @@ pub fn graph_toml_at(nodes: usize, processes: usize, controller_hz: Option<f64>)
     };
     let robot = || placed.then(|| "robot".to_string());
     let mut f = String::with_capacity(200 * nodes);
-    let beside = match (controllers, extra) {
-        (0, 0) => "nothing beside it".to_string(),
-        (c, e) => {
-            let mut parts = Vec::new();
-            if c > 0 {
-                let (s, each) = if c == 1 { ("", "") } else { ("s", " each") };
-                parts.push(format!(
-                    "{c} controller{s} (sensor → estimator → policy → safety{each})"
-                ));
-            }
-            if e > 0 {
-                let s = if e == 1 { "" } else { "s" };
-                parts.push(format!("{e} extra sensor{s} (extra_0 …)"));
-            }
-            format!("{} beside it", parts.join(" and "))
-        }
+    let counted = |n: usize, noun: &str| ratelab_core::metrics::counted(n as u64, noun);
+    let mut parts = Vec::new();
+    if controllers > 0 {
+        let each = if controllers == 1 { "" } else { " each" };
+        parts.push(format!(
+            "{} (sensor → estimator → policy → safety{each})",
+            counted(controllers, "controller")
+        ));
+    }
+    if extra > 0 {
+        parts.push(format!("{} (extra_0 …)", counted(extra, "extra sensor")));
+    }
+    let beside = if parts.is_empty() {
+        "nothing beside it".to_string()
+    } else {
+        format!("{} beside it", parts.join(" and "))
     };
     let _ = writeln!(
         f,
