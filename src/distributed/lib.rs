@@ -408,9 +408,9 @@ impl Keys {
     }
 
     /// Virtual clock, a launch linked directly: where process `p` sends the launcher its
-    /// tick reports to follow, in batches ([`wire::Ticked`], up to
-    /// [`lockstep::FOLLOWED_BATCH`] to a message, and always before it waits for the
-    /// horizon), while the other processes hear each report on [`Keys::ticked`] (or on the
+    /// tick reports to follow, in batches ([`wire::Ticked`]: once its run passes the time
+    /// the launcher's horizon names, [`lockstep::follow_at`], and always before it waits
+    /// for the horizon), while the other processes hear each report on [`Keys::ticked`] (or on the
     /// sample it published, [`lockstep::reports_ride_on_samples`]).
     pub fn progress(&self, p: &str) -> String {
         format!("{}/@progress/{p}", self.prefix)

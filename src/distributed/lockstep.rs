@@ -31,7 +31,7 @@
 //! there: Zenoh's one thread must never wait to send, `launcher/outbox.rs`). The launcher
 //! is also the time authority: it lets the processes run up to a horizon
 //! ([`wire::ToProcess::Horizon`]), [`horizon_periods`] periods of the fastest node ahead of
-//! the events it has seen reported (8 when a lab paces the run; up to 64 otherwise), and ends the run early by not moving it on (a Ctrl-C).
+//! the events it has seen reported (8 when a lab paces the run; up to 256 otherwise), and ends the run early by not moving it on (a Ctrl-C).
 //!
 //! In a launch linked directly ([`crate::open_linked_peer`]) the processes are linked to each
 //! other, and a process's message of reports goes to every other process
@@ -39,8 +39,8 @@
 //! over their own link; between two processes the reports of ticks that published a
 //! crossing sample ride on the last such sample instead ([`reports_ride_on_samples`]), so a
 //! hop is one message. The launcher hears the same reports in batches
-//! ([`subscribe_progress`], [`FOLLOWED_BATCH`]: always before a process waits for the
-//! horizon), follows them as above, and moves the horizon, but hands nothing on until the
+//! ([`subscribe_progress`], [`follow_at`]: once a process's run passes the time the
+//! horizon names, and always before it waits for the horizon), follows them as above, and moves the horizon, but hands nothing on until the
 //! end.
 //! Following the reports, it knows the end (a stop, a failure, a process gone) and the
 //! last seq of every topic before the processes report. Linked directly it knows them as
@@ -69,10 +69,12 @@ use zenoh::Wait;
 pub const HORIZON_PERIODS: u64 = 8;
 
 /// How far ahead the horizon reaches at most, in periods of the fastest node, when nothing
-/// paces the run: each move of the horizon wakes the launcher's main thread and sends every
-/// process a message, which at 8 periods cost an instant of the chapter's launch about a
-/// tenth of its time (BENCHMARKS.md, issue 76 item 4).
-pub const HORIZON_PERIODS_UNPACED: u64 = 64;
+/// paces the run: each move of the horizon wakes the launcher's main thread, sends every
+/// process a message and, linked directly, has every process send the launcher its reports
+/// ([`follow_at`]). At 8 periods the moves cost an instant of the chapter's launch about a
+/// tenth of its time; from 64 to 256, with the reports sent once a move, the launcher's CPU
+/// fell by 40% (BENCHMARKS.md, issue 76 item 4).
+pub const HORIZON_PERIODS_UNPACED: u64 = 256;
 
 /// The periods of the fastest node the horizon reaches ahead for the run `order` follows:
 /// [`HORIZON_PERIODS`] when `paced`; else the most up to [`HORIZON_PERIODS_UNPACED`] (halving
@@ -95,17 +97,28 @@ pub fn horizon_periods(order: &ratelab_runtime::runcore::Follower, paced: bool) 
     periods
 }
 
-/// In a launch linked directly, the most of its own tick reports a process keeps before it
-/// sends them to the launcher to follow ([`Keys::progress`]); it sends what it has kept
-/// before it waits for the horizon, and at its run's end, whatever the count. The other
+/// In a launch linked directly, the run time from which the launcher wants the tick reports
+/// a process keeps for it, for a horizon at `horizon_ns` reaching `lookahead_ns` ahead: the
+/// launcher moves the horizon on once its view of the run passes `horizon_ns −
+/// lookahead_ns / 2`, so that is when it must hear from every process. A process sends what
+/// it has kept once its run reaches that time (it has then made every report the launcher
+/// needs from it to get there), and otherwise only before it waits for the horizon, before a
+/// tick that may be long, at its run's end, or after [`FOLLOWED_MAX_AGE`]. The other
 /// processes hear every report as it is made ([`Keys::ticked`], or on the sample it
-/// published, [`reports_ride_on_samples`]): only the launcher's view,
-/// which moves the horizon and counts the run, comes in batches. Following every report
-/// cost the launcher 77 µs of CPU an instant of the chapter's launch, on a machine of 2
-/// cores where the processes whose turn it was needed them (BENCHMARKS.md, issue 76 item 4).
-/// 32 is a chapter's instant or two of robot and policy reports; a horizon reaches 8 to 64
-/// periods ahead ([`horizon_periods`]), so the launcher hears of a run's progress long
-/// before the horizon is reached.
+/// published, [`reports_ride_on_samples`]): only the launcher's view, which moves the
+/// horizon and counts the run, comes in batches, about one a process for each move of the
+/// horizon. Every message the launcher takes wakes it: following every report cost it 77 µs
+/// of CPU an instant of the chapter's launch, batches of [`FOLLOWED_BATCH`] 7–8 µs, and one
+/// batch a process a move of a 256-period horizon about 4 µs (BENCHMARKS.md, issue 76 item
+/// 4).
+pub fn follow_at(horizon_ns: u64, lookahead_ns: u64) -> u64 {
+    horizon_ns.saturating_sub(lookahead_ns / 2)
+}
+
+/// In a launch linked directly whose launcher names no run time to send from
+/// ([`follow_at`]), the most of its own tick reports a process keeps before it sends them to
+/// the launcher to follow ([`Keys::progress`]); it sends what it has kept before it waits
+/// for the horizon, and at its run's end, whatever the count.
 pub const FOLLOWED_BATCH: usize = 32;
 
 /// In a launch linked directly, how long a process keeps a report for the launcher at most
@@ -429,8 +442,8 @@ pub(crate) mod tests {
         assert_eq!(inbox.newest_ns(), None);
     }
 
-    /// The horizon reaches 64 periods ahead for the chapter's graph, 8 when paced, and
-    /// fewer for a graph whose ticks in 64 periods would fill more than a quarter of what a
+    /// The horizon reaches 256 periods ahead for the chapter's graph, 8 when paced, and
+    /// fewer for a graph whose ticks in 256 periods would fill more than a quarter of what a
     /// process keeps ahead ([`MAX_AHEAD`]), never fewer than 8.
     #[test]
     fn the_horizon_reaches_as_far_as_the_graph_s_size_allows() {
@@ -452,8 +465,8 @@ pub(crate) mod tests {
             HORIZON_PERIODS_UNPACED
         );
         assert_eq!(periods(DEFAULT_GRAPH_TOML, true).0, HORIZON_PERIODS);
-        // The chapter's three nodes at 50 Hz: 65 ticks each in 64 periods.
-        assert_eq!(periods(DEFAULT_GRAPH_TOML, false).1, 3 * 65);
+        // The chapter's three nodes at 50 Hz: 257 ticks each in 256 periods.
+        assert_eq!(periods(DEFAULT_GRAPH_TOML, false).1, 3 * 257);
         for nodes in [1_000, 10_000] {
             let (p, ticks) = periods(&graph_toml(nodes, 2), false);
             assert!(p < HORIZON_PERIODS_UNPACED, "{nodes} nodes: {p}");

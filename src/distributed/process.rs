@@ -628,13 +628,17 @@ mod tests {
             need: Vec::new(),
         })
         .unwrap();
-        tx.send(ToProcess::Horizon { until_ns: 1 }).unwrap();
+        let horizon = |until_ns| ToProcess::Horizon {
+            until_ns,
+            follow_at_ns: None,
+        };
+        tx.send(horizon(1)).unwrap();
         tx.send(ToProcess::ReportTaken).unwrap();
-        tx.send(ToProcess::Horizon { until_ns: 2 }).unwrap();
+        tx.send(horizon(2)).unwrap();
         let began = Instant::now();
         await_report_taken(&rx, &stop, &gone, long);
         assert!(began.elapsed() < Duration::from_secs(30));
-        assert_eq!(rx.try_recv().ok(), Some(ToProcess::Horizon { until_ns: 2 }));
+        assert_eq!(rx.try_recv().ok(), Some(horizon(2)));
         // No receipt: it leaves after the wait.
         let began = Instant::now();
         await_report_taken(&rx, &stop, &gone, Duration::from_millis(200));

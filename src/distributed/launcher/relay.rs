@@ -15,7 +15,7 @@
 //! directly ([`crate::launcher::LaunchOptions::star`]) is small, and there every process
 //! hears every other's reports itself, over their own link: the launcher follows them as
 //! here, from the batches each process sends it ([`crate::Keys::progress`],
-//! [`crate::lockstep::FOLLOWED_BATCH`]), but hands nothing on during the run
+//! [`crate::lockstep::follow_at`]), but hands nothing on during the run
 //! ([`Course::relays`]); at its end it hands each process the last [`MAX_RELAYED`] it took,
 //! for the rare report that reached it and not another process (a process that went
 //! between its two puts; a process ignores those it has). A report that reached the
@@ -373,7 +373,7 @@ impl Relay {
         });
         let taker = relay.clone();
         // Linked directly, each process sends the launcher its reports in batches to follow
-        // (`lockstep::FOLLOWED_BATCH`), where the others hear each as it is made.
+        // (`lockstep::follow_at`), where the others hear each as it is made.
         let take = move |ms| taker.take(ms);
         let subscribers = if direct {
             subscribe_progress(session, keys, names, take)?

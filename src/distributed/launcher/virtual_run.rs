@@ -161,8 +161,19 @@ impl Launch<'_> {
             let want = base.saturating_add(lookahead).min(cfg.duration.0);
             let low = horizon.is_none_or(|h| h < base.saturating_add(lookahead / 2));
             if !stop.is_stopped() && low && horizon.is_none_or(|h| want > h) {
+                // Linked directly, the processes send the launcher their reports once their
+                // run passes where it moves the horizon on next.
+                let follow_at_ns = (relay.follows_in_batches())
+                    .then(|| crate::lockstep::follow_at(want, lookahead));
                 for p in &self.names {
-                    link.tell(p, &ToProcess::Horizon { until_ns: want })?;
+                    let until_ns = want;
+                    link.tell(
+                        p,
+                        &ToProcess::Horizon {
+                            until_ns,
+                            follow_at_ns,
+                        },
+                    )?;
                 }
                 horizon = Some(want);
                 relay.set_horizon(want);
@@ -246,7 +257,7 @@ impl Launch<'_> {
 /// Linked directly, once a process is gone: how long no report may come in (from any
 /// process, in turn or ahead of it, [`Relay::accepted`]) before the run ends, and how long
 /// the launcher waits for that at most. A stalled process sends what it has kept
-/// ([`crate::lockstep::FOLLOWED_BATCH`]) within [`crate::lockstep::FOLLOWED_MAX_AGE`] of
+/// ([`crate::lockstep::follow_at`]) within [`crate::lockstep::FOLLOWED_MAX_AGE`] of
 /// making it, once its main thread looks again (every 100 ms when nothing comes).
 const FOLLOWED_SETTLE: Duration = Duration::from_millis(300);
 const FOLLOWED_SETTLE_MAX: Duration = Duration::from_secs(2);

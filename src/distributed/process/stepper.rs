@@ -204,6 +204,8 @@ struct Turns {
     followed: Option<Followed>,
     /// The last event looked at lay past the horizon: the run waits for the launcher here.
     at_horizon: bool,
+    /// The run time of the latest event looked at, ns: every event before it is taken.
+    looked_ns: u64,
     stop: StopFlag,
 }
 
@@ -261,13 +263,19 @@ struct Followed {
     batch: FollowedBatch,
 }
 
-/// The reports a process keeps for the launcher to follow ([`lockstep::FOLLOWED_BATCH`]):
-/// when they are due, and the messages they make.
+/// The reports a process keeps for the launcher to follow ([`lockstep::follow_at`]): when
+/// they are due, and the messages they make.
 #[derive(Debug, Default)]
 struct FollowedBatch {
     kept: Vec<Ticked>,
     /// When the oldest of `kept` was kept.
     since: Option<Instant>,
+    /// The run time past which the launcher wants what is kept, as its newest horizon named
+    /// it ([`lockstep::follow_at`]; `None` once sent for it).
+    follow_at_ns: Option<u64>,
+    /// The launcher names a time to send from: batches of [`lockstep::FOLLOWED_BATCH`]
+    /// only where it does not.
+    named: bool,
 }
 
 impl FollowedBatch {
@@ -279,22 +287,44 @@ impl FollowedBatch {
         }
     }
 
+    /// The launcher's newest horizon names run time `follow_at_ns` to send from (`None`: it
+    /// names none).
+    fn follow_from(&mut self, follow_at_ns: Option<u64>) {
+        self.follow_at_ns = follow_at_ns;
+        self.named = follow_at_ns.is_some();
+    }
+
+    /// Whether the run here has gone past where the launcher wants to hear from it: it
+    /// looks at an event after run time [`FollowedBatch::follow_at_ns`] (`looked_ns`), so
+    /// every report the launcher needs from it to get there is made.
+    fn reached(&self, looked_ns: u64) -> bool {
+        self.follow_at_ns.is_some_and(|at| looked_ns > at)
+    }
+
     /// Whether what is kept is due to the launcher: any report when the run waits for the
-    /// horizon or is over here (`waiting`), or kept for [`lockstep::FOLLOWED_MAX_AGE`];
-    /// else once [`lockstep::FOLLOWED_BATCH`] are kept.
-    fn due(&self, waiting: bool) -> bool {
+    /// horizon or is over here (`waiting`), once the run here has looked at an event past
+    /// where the launcher wants to hear from it (`looked_ns`, [`FollowedBatch::reached`]), or
+    /// kept for [`lockstep::FOLLOWED_MAX_AGE`]; where the launcher names no such time, once
+    /// [`lockstep::FOLLOWED_BATCH`] are kept.
+    fn due(&self, waiting: bool, looked_ns: u64) -> bool {
         let overdue = (self.since).is_some_and(|t| t.elapsed() >= lockstep::FOLLOWED_MAX_AGE);
-        !self.kept.is_empty() && (waiting || overdue || self.kept.len() >= lockstep::FOLLOWED_BATCH)
+        let full = !self.named && self.kept.len() >= lockstep::FOLLOWED_BATCH;
+        !self.kept.is_empty() && (waiting || overdue || full || self.reached(looked_ns))
     }
 
     /// What is kept, as messages of at most [`wire::MAX_TICKS_PER_MESSAGE`] reports each,
     /// in order; nothing is kept after.
-    fn take_messages(&mut self) -> Vec<Vec<u8>> {
+    /// Sent for the launcher's time once the run here has passed it (`looked_ns`): nothing
+    /// more is due for it until the next horizon names another.
+    fn take_messages(&mut self, looked_ns: u64) -> Vec<Vec<u8>> {
         let messages = (self.kept.chunks(wire::MAX_TICKS_PER_MESSAGE))
             .map(wire::encode_reports)
             .collect();
         self.kept.clear();
         self.since = None;
+        if self.reached(looked_ns) {
+            self.follow_at_ns = None;
+        }
         messages
     }
 }
@@ -332,6 +362,7 @@ impl Stepper {
                 batch: FollowedBatch::default(),
             }),
             at_horizon: false,
+            looked_ns: 0,
             stop,
             share,
         };
@@ -343,10 +374,17 @@ impl Stepper {
         }
     }
 
-    /// The launcher lets the run go up to run time `until_ns`.
-    pub(super) fn horizon(&mut self, until_ns: u64) {
+    /// The launcher lets the run go up to run time `until_ns` and, linked directly, wants
+    /// the reports kept for it once the run passes `follow_at_ns` ([`lockstep::follow_at`]).
+    pub(super) fn horizon(&mut self, until_ns: u64, follow_at_ns: Option<u64>) {
         let h = &mut self.turns.horizon_ns;
-        *h = Some(h.unwrap_or(0).max(until_ns));
+        if h.is_some_and(|h| h >= until_ns) {
+            return; // an older horizon, overtaken
+        }
+        *h = Some(until_ns);
+        if let Some(f) = self.turns.followed.as_mut() {
+            f.batch.follow_from(follow_at_ns);
+        }
     }
 
     /// The launcher ended the run: nothing more runs here.
@@ -464,6 +502,7 @@ impl<'c> DrivePolicy<Event, Events<'c>> for Advance<'_> {
     fn turn(&mut self, _index: u64, event: Event) -> Result<Turn, DistError> {
         let t = &mut *self.turns;
         let (i, at) = event.node_at();
+        t.looked_ns = t.looked_ns.max(at.0);
         if t.horizon_ns.is_none_or(|h| h < at.0) {
             t.at_horizon = true;
             return Ok(Turn::Wait);
@@ -663,8 +702,8 @@ impl Turns {
         let Some(f) = self.followed.as_mut() else {
             return Ok(());
         };
-        if f.batch.due(waiting) {
-            for bytes in f.batch.take_messages() {
+        if f.batch.due(waiting, self.looked_ns) {
+            for bytes in f.batch.take_messages(self.looked_ns) {
                 f.publisher.put(bytes).wait()?;
             }
         }
@@ -707,9 +746,12 @@ pub(super) fn run_lockstep(
         }
         crossbeam_channel::select! {
             recv(ctl) -> m => match m {
-                Ok(ToProcess::Horizon { until_ns }) => {
+                Ok(ToProcess::Horizon {
+                    until_ns,
+                    follow_at_ns,
+                }) => {
                     if let Some(r) = ratelab_runtime::graph::lock(&slot.run).as_mut() {
-                        r.horizon(until_ns);
+                        r.horizon(until_ns, follow_at_ns);
                     }
                     slot.wake(true);
                 }
@@ -891,32 +933,32 @@ mod tests {
         }
     }
 
-    /// Linked directly, the launcher hears a process's reports in batches: a full batch, or
-    /// any kept when the run waits for it here or the oldest has waited long enough; never
-    /// an empty message. What it is sent is every report kept, in order, in messages the
-    /// launcher accepts.
+    /// Linked directly, where the launcher names no time to send from, it hears a process's
+    /// reports in batches: a full batch, or any kept when the run waits for it here or the
+    /// oldest has waited long enough; never an empty message. What it is sent is every
+    /// report kept, in order, in messages the launcher accepts.
     #[test]
     fn the_launcher_follows_a_process_in_batches_and_before_it_waits() {
         let mut b = FollowedBatch::default();
-        assert!(!b.due(true), "nothing kept: nothing due, even waiting");
+        assert!(!b.due(true, 0), "nothing kept: nothing due, even waiting");
         let mut made: Vec<_> = (0..FOLLOWED_BATCH as u64 - 1)
             .map(|i| report("robot", i, 0))
             .collect();
         b.keep(&mut made);
         assert!(made.is_empty());
-        assert!(!b.due(false), "one short of a batch");
+        assert!(!b.due(false, u64::MAX), "one short of a batch");
         assert!(
-            b.due(true),
+            b.due(true, 0),
             "the run waits for the launcher: due whatever the count"
         );
         b.keep(&mut vec![report("robot", FOLLOWED_BATCH as u64 - 1, 0)]);
-        assert!(b.due(false), "a full batch");
+        assert!(b.due(false, 0), "a full batch");
         // Kept long enough: due one at a time.
         let mut one = FollowedBatch::default();
         one.keep(&mut vec![report("robot", 0, 0)]);
-        assert!(!one.due(false));
+        assert!(!one.due(false, 0));
         one.since = Some(Instant::now() - FOLLOWED_MAX_AGE - Duration::from_millis(1));
-        assert!(one.due(false), "overdue");
+        assert!(one.due(false, 0), "overdue");
         // Many kept at once (a process that waited long for the horizon): in messages the
         // launcher decodes, every report once, in order; then nothing is kept.
         let n = 3 * MAX_TICKS_PER_MESSAGE as u64 + 5;
@@ -925,13 +967,46 @@ mod tests {
                 .map(|i| report("robot", i, 0))
                 .collect(),
         );
-        let messages = b.take_messages();
+        let messages = b.take_messages(0);
         assert_eq!(messages.len(), 4);
         let got: Vec<u64> = (messages.iter())
             .flat_map(|m| wire::decode_reports(m).unwrap())
             .map(|m| m.index)
             .collect();
         assert_eq!(got, (0..n).collect::<Vec<_>>());
-        assert!(!b.due(true) && b.take_messages().is_empty() && b.since.is_none());
+        assert!(!b.due(true, 0) && b.take_messages(0).is_empty() && b.since.is_none());
+    }
+
+    /// Where the launcher's horizon names a run time to send from, a process sends what it
+    /// has kept once its run looks at an event past it, however many or few reports it
+    /// holds (not every [`FOLLOWED_BATCH`]), then nothing more for it until the next horizon
+    /// names another; before it waits for the horizon, and when overdue, as before.
+    #[test]
+    fn a_process_sends_the_launcher_its_reports_once_its_run_passes_the_named_time() {
+        let at_ns = 1_000;
+        let mut b = FollowedBatch::default();
+        b.follow_from(Some(at_ns));
+        let mut made: Vec<_> = (0..3 * FOLLOWED_BATCH as u64)
+            .map(|i| report("robot", i, 0))
+            .collect();
+        b.keep(&mut made);
+        assert!(!b.due(false, at_ns), "at the time named, not past it: kept");
+        assert!(b.due(true, at_ns), "the run waits for the horizon: due");
+        assert!(b.due(false, at_ns + 1), "past the time named: due");
+        assert_eq!(b.take_messages(at_ns + 1).len(), 2);
+        // Sent for that time: what is kept next waits for the next horizon's time.
+        b.keep(&mut vec![report("robot", 3 * FOLLOWED_BATCH as u64, 0)]);
+        assert!(!b.due(false, u64::MAX), "nothing more for the same time");
+        assert!(
+            b.due(true, u64::MAX),
+            "but before the run waits for the horizon"
+        );
+        b.follow_from(Some(2 * at_ns));
+        assert!(!b.due(false, 2 * at_ns));
+        assert!(b.due(false, 2 * at_ns + 1));
+        // Sent early (the run waited), the time still stands for what is kept after.
+        assert_eq!(b.take_messages(2 * at_ns).len(), 1);
+        b.keep(&mut vec![report("robot", 3 * FOLLOWED_BATCH as u64 + 1, 0)]);
+        assert!(b.due(false, 2 * at_ns + 1));
     }
 }

@@ -106,6 +106,12 @@ pub enum ToProcess {
     Horizon {
         /// Run time, ns.
         until_ns: u64,
+        /// Linked directly: the run time from which the launcher wants the reports a
+        /// process keeps for it ([`crate::lockstep::follow_at`]): once the process's run
+        /// reaches it, it sends what it has kept. `None` (a star, or a launcher that names
+        /// none): every [`crate::lockstep::FOLLOWED_BATCH`] reports.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        follow_at_ns: Option<u64>,
     },
     /// Virtual clock, before the stop: the run had `count` events (numbered from 0): take
     /// the report of every one of them before reporting, so that every process has replayed
