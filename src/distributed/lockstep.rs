@@ -100,9 +100,9 @@ pub fn horizon_periods(order: &ratelab_runtime::runcore::Follower, paced: bool) 
 /// In a launch linked directly, the run time from which the launcher wants the tick reports
 /// a process keeps for it, for a horizon at `horizon_ns` reaching `lookahead_ns` ahead: the
 /// launcher moves the horizon on once its view of the run passes `horizon_ns −
-/// lookahead_ns / 2`, so that is when it must hear from every process. A process sends what
-/// it has kept once its run reaches that time (it has then made every report the launcher
-/// needs from it to get there), and otherwise only before it waits for the horizon, before a
+/// lookahead_ns / 2` ([`horizon_low`]), so that is when it must hear from every process. A
+/// process sends what it has kept once its run passes that time (it has then made every
+/// report the launcher needs from it to get there), and otherwise only before it waits for the horizon, before a
 /// tick that may be long, at its run's end, or after [`FOLLOWED_MAX_AGE`]. The other
 /// processes hear every report as it is made ([`Keys::ticked`], or on the sample it
 /// published, [`reports_ride_on_samples`]): only the launcher's view, which moves the
@@ -115,8 +115,17 @@ pub fn follow_at(horizon_ns: u64, lookahead_ns: u64) -> u64 {
     horizon_ns.saturating_sub(lookahead_ns / 2)
 }
 
+/// Whether the launcher moves the horizon at `horizon_ns` (reaching `lookahead_ns` ahead)
+/// on, its view of the run being at an event at run time `at_ns`: once less than half the
+/// lookahead is left, that is once `at_ns` is past [`follow_at`] (the time the processes
+/// send their reports from).
+pub fn horizon_low(horizon_ns: u64, at_ns: u64, lookahead_ns: u64) -> bool {
+    at_ns.saturating_add(lookahead_ns / 2) > horizon_ns
+}
+
 /// In a launch linked directly whose launcher names no run time to send from
-/// ([`follow_at`]), the most of its own tick reports a process keeps before it sends them to
+/// ([`follow_at`]: a launcher of an earlier ratelab, as a process on another host may
+/// meet), the most of its own tick reports a process keeps before it sends them to
 /// the launcher to follow ([`Keys::progress`]); it sends what it has kept before it waits
 /// for the horizon, and at its run's end, whatever the count.
 pub const FOLLOWED_BATCH: usize = 32;
@@ -204,7 +213,7 @@ impl TickInbox {
         self.next = index + 1;
         // Those before it given up where they are, at the map's front: splitting the map
         // there moved every report kept after it into a new map, at every take (the
-        // launcher follows a batch of 32 at a time).
+        // launcher follows a batch of hundreds at a time, [`follow_at`]).
         while let Some(first) = self.ahead.first_entry() {
             if *first.key() >= self.next {
                 break;
@@ -440,6 +449,29 @@ pub(crate) mod tests {
         // Taken in turn, a report is no longer ahead.
         inbox.take(9).unwrap();
         assert_eq!(inbox.newest_ns(), None);
+    }
+
+    /// The processes send the launcher their reports from the last run time at which it
+    /// does not yet move the horizon on: past it, it does, for even and odd lookaheads and
+    /// horizons at or near the run's start.
+    #[test]
+    fn the_processes_send_from_where_the_launcher_moves_the_horizon_on() {
+        for lookahead in [1, 2, 7, 8, 20_000_000, 5_120_000_001] {
+            for horizon in [0, 1, lookahead / 2, lookahead, 3 * lookahead + 5] {
+                let at = follow_at(horizon, lookahead);
+                assert!(at <= horizon, "{lookahead} {horizon}");
+                if horizon >= lookahead / 2 {
+                    assert!(
+                        !horizon_low(horizon, at, lookahead),
+                        "{lookahead} {horizon}"
+                    );
+                }
+                assert!(
+                    horizon_low(horizon, at + 1, lookahead),
+                    "{lookahead} {horizon}"
+                );
+            }
+        }
     }
 
     /// The horizon reaches 256 periods ahead for the chapter's graph, 8 when paced, and

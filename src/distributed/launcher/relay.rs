@@ -28,7 +28,8 @@
 
 use super::outbox::{Out, Outbox, Outboxes};
 use crate::lockstep::{
-    check_tick_report, horizon_periods, subscribe_progress, subscribe_reports, TickInbox,
+    check_tick_report, horizon_low, horizon_periods, subscribe_progress, subscribe_reports,
+    TickInbox,
 };
 use crate::wire::{self, Ticked, MAX_RELAYED};
 use crate::{DistError, Keys};
@@ -441,7 +442,7 @@ impl Relay {
             c.take_in(ms, &self.spec);
             c.advance(&self.spec);
             let low = match (c.horizon, c.cursor.next()) {
-                (Some(h), Some(e)) => e.node_at().1 .0.saturating_add(c.lookahead / 2) > h,
+                (Some(h), Some(e)) => horizon_low(h, e.node_at().1 .0, c.lookahead),
                 _ => false,
             };
             (c.due(&self.process_of), low || c.end.is_some())

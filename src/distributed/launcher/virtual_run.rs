@@ -159,7 +159,7 @@ impl Launch<'_> {
             // Paced: no instant more than the lookahead ahead of its wall time.
             let base = pacer.run_time_now().map_or(t.0, |due| t.0.min(due.0));
             let want = base.saturating_add(lookahead).min(cfg.duration.0);
-            let low = horizon.is_none_or(|h| h < base.saturating_add(lookahead / 2));
+            let low = horizon.is_none_or(|h| crate::lockstep::horizon_low(h, base, lookahead));
             if !stop.is_stopped() && low && horizon.is_none_or(|h| want > h) {
                 // Linked directly, the processes send the launcher their reports once their
                 // run passes where it moves the horizon on next.
@@ -256,8 +256,8 @@ impl Launch<'_> {
 
 /// Linked directly, once a process is gone: how long no report may come in (from any
 /// process, in turn or ahead of it, [`Relay::accepted`]) before the run ends, and how long
-/// the launcher waits for that at most. A stalled process sends what it has kept
-/// ([`crate::lockstep::follow_at`]) within [`crate::lockstep::FOLLOWED_MAX_AGE`] of
+/// the launcher waits for that at most. A stalled process sends what it has kept within
+/// [`crate::lockstep::FOLLOWED_MAX_AGE`] of
 /// making it, once its main thread looks again (every 100 ms when nothing comes).
 const FOLLOWED_SETTLE: Duration = Duration::from_millis(300);
 const FOLLOWED_SETTLE_MAX: Duration = Duration::from_secs(2);

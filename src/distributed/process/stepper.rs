@@ -204,8 +204,6 @@ struct Turns {
     followed: Option<Followed>,
     /// The last event looked at lay past the horizon: the run waits for the launcher here.
     at_horizon: bool,
-    /// The run time of the latest event looked at, ns: every event before it is taken.
-    looked_ns: u64,
     stop: StopFlag,
 }
 
@@ -218,7 +216,7 @@ pub(super) struct Reporting {
     /// [`crate::lockstep::reports_ride_on_samples`]).
     pub ticked: zenoh::pubsub::Publisher<'static>,
     /// Linked directly: the launcher's copy, in batches ([`crate::Keys::progress`],
-    /// [`crate::lockstep::FOLLOWED_BATCH`]).
+    /// [`crate::lockstep::follow_at`]).
     pub progress: Option<zenoh::pubsub::Publisher<'static>>,
     /// Ticks may run in a Zenoh callback at all (not under `--ros2`).
     pub callback_ticks: bool,
@@ -271,11 +269,15 @@ struct FollowedBatch {
     /// When the oldest of `kept` was kept.
     since: Option<Instant>,
     /// The run time past which the launcher wants what is kept, as its newest horizon named
-    /// it ([`lockstep::follow_at`]; `None` once sent for it).
+    /// it ([`lockstep::follow_at`]; `None` once the run here has passed it and sent).
     follow_at_ns: Option<u64>,
     /// The launcher names a time to send from: batches of [`lockstep::FOLLOWED_BATCH`]
     /// only where it does not.
     named: bool,
+    /// The run time of the latest event the run here has looked at, ns: every event at an
+    /// earlier time is taken (the drive loop looks at events in the run's order, each until
+    /// it is taken).
+    looked_ns: u64,
 }
 
 impl FollowedBatch {
@@ -294,37 +296,47 @@ impl FollowedBatch {
         self.named = follow_at_ns.is_some();
     }
 
+    /// The run here looks at an event at run time `at_ns`.
+    fn look(&mut self, at_ns: u64) {
+        self.looked_ns = self.looked_ns.max(at_ns);
+    }
+
     /// Whether the run here has gone past where the launcher wants to hear from it: it
-    /// looks at an event after run time [`FollowedBatch::follow_at_ns`] (`looked_ns`), so
-    /// every report the launcher needs from it to get there is made.
-    fn reached(&self, looked_ns: u64) -> bool {
-        self.follow_at_ns.is_some_and(|at| looked_ns > at)
+    /// has looked at an event after run time [`FollowedBatch::follow_at_ns`], so every
+    /// report the launcher needs from it to get there is made.
+    fn reached(&self) -> bool {
+        self.follow_at_ns.is_some_and(|at| self.looked_ns > at)
     }
 
     /// Whether what is kept is due to the launcher: any report when the run waits for the
-    /// horizon or is over here (`waiting`), once the run here has looked at an event past
-    /// where the launcher wants to hear from it (`looked_ns`, [`FollowedBatch::reached`]), or
-    /// kept for [`lockstep::FOLLOWED_MAX_AGE`]; where the launcher names no such time, once
+    /// horizon or is over here (`waiting`), once the run here has passed where the launcher
+    /// wants to hear from it ([`FollowedBatch::reached`]), or kept for
+    /// [`lockstep::FOLLOWED_MAX_AGE`]; where the launcher names no such time, once
     /// [`lockstep::FOLLOWED_BATCH`] are kept.
-    fn due(&self, waiting: bool, looked_ns: u64) -> bool {
+    fn due(&self, waiting: bool) -> bool {
         let overdue = (self.since).is_some_and(|t| t.elapsed() >= lockstep::FOLLOWED_MAX_AGE);
         let full = !self.named && self.kept.len() >= lockstep::FOLLOWED_BATCH;
-        !self.kept.is_empty() && (waiting || overdue || full || self.reached(looked_ns))
+        !self.kept.is_empty() && (waiting || overdue || full || self.reached())
     }
 
-    /// What is kept, as messages of at most [`wire::MAX_TICKS_PER_MESSAGE`] reports each,
-    /// in order; nothing is kept after.
-    /// Sent for the launcher's time once the run here has passed it (`looked_ns`): nothing
-    /// more is due for it until the next horizon names another.
-    fn take_messages(&mut self, looked_ns: u64) -> Vec<Vec<u8>> {
+    /// What is due ([`FollowedBatch::due`]), as messages of at most
+    /// [`wire::MAX_TICKS_PER_MESSAGE`] reports each, in order; nothing is kept after. Once
+    /// the run here has passed the launcher's time, whatever it sent (nothing, when it had
+    /// sent everything just before), nothing more is due for that time: the next horizon
+    /// names another.
+    fn take_due(&mut self, waiting: bool) -> Vec<Vec<u8>> {
+        let due = self.due(waiting);
+        if self.reached() {
+            self.follow_at_ns = None;
+        }
+        if !due {
+            return Vec::new();
+        }
         let messages = (self.kept.chunks(wire::MAX_TICKS_PER_MESSAGE))
             .map(wire::encode_reports)
             .collect();
         self.kept.clear();
         self.since = None;
-        if self.reached(looked_ns) {
-            self.follow_at_ns = None;
-        }
         messages
     }
 }
@@ -362,7 +374,6 @@ impl Stepper {
                 batch: FollowedBatch::default(),
             }),
             at_horizon: false,
-            looked_ns: 0,
             stop,
             share,
         };
@@ -502,7 +513,9 @@ impl<'c> DrivePolicy<Event, Events<'c>> for Advance<'_> {
     fn turn(&mut self, _index: u64, event: Event) -> Result<Turn, DistError> {
         let t = &mut *self.turns;
         let (i, at) = event.node_at();
-        t.looked_ns = t.looked_ns.max(at.0);
+        if let Some(f) = t.followed.as_mut() {
+            f.batch.look(at.0);
+        }
         if t.horizon_ns.is_none_or(|h| h < at.0) {
             t.at_horizon = true;
             return Ok(Turn::Wait);
@@ -702,10 +715,8 @@ impl Turns {
         let Some(f) = self.followed.as_mut() else {
             return Ok(());
         };
-        if f.batch.due(waiting, self.looked_ns) {
-            for bytes in f.batch.take_messages(self.looked_ns) {
-                f.publisher.put(bytes).wait()?;
-            }
+        for bytes in f.batch.take_due(waiting) {
+            f.publisher.put(bytes).wait()?;
         }
         Ok(())
     }
@@ -933,32 +944,33 @@ mod tests {
         }
     }
 
-    /// Linked directly, where the launcher names no time to send from, it hears a process's
-    /// reports in batches: a full batch, or any kept when the run waits for it here or the
-    /// oldest has waited long enough; never an empty message. What it is sent is every
-    /// report kept, in order, in messages the launcher accepts.
+    /// Linked directly, where the launcher names no time to send from (an earlier ratelab's),
+    /// it hears a process's reports in batches: a full batch, or any kept when the run waits
+    /// for it here or the oldest has waited long enough; never an empty message. What it is
+    /// sent is every report kept, in order, in messages the launcher accepts.
     #[test]
     fn the_launcher_follows_a_process_in_batches_and_before_it_waits() {
         let mut b = FollowedBatch::default();
-        assert!(!b.due(true, 0), "nothing kept: nothing due, even waiting");
+        assert!(!b.due(true), "nothing kept: nothing due, even waiting");
         let mut made: Vec<_> = (0..FOLLOWED_BATCH as u64 - 1)
             .map(|i| report("robot", i, 0))
             .collect();
         b.keep(&mut made);
         assert!(made.is_empty());
-        assert!(!b.due(false, u64::MAX), "one short of a batch");
+        b.look(u64::MAX);
+        assert!(!b.due(false), "one short of a batch");
         assert!(
-            b.due(true, 0),
+            b.due(true),
             "the run waits for the launcher: due whatever the count"
         );
         b.keep(&mut vec![report("robot", FOLLOWED_BATCH as u64 - 1, 0)]);
-        assert!(b.due(false, 0), "a full batch");
+        assert!(b.due(false), "a full batch");
         // Kept long enough: due one at a time.
         let mut one = FollowedBatch::default();
         one.keep(&mut vec![report("robot", 0, 0)]);
-        assert!(!one.due(false, 0));
+        assert!(!one.due(false));
         one.since = Some(Instant::now() - FOLLOWED_MAX_AGE - Duration::from_millis(1));
-        assert!(one.due(false, 0), "overdue");
+        assert!(one.due(false), "overdue");
         // Many kept at once (a process that waited long for the horizon): in messages the
         // launcher decodes, every report once, in order; then nothing is kept.
         let n = 3 * MAX_TICKS_PER_MESSAGE as u64 + 5;
@@ -967,14 +979,14 @@ mod tests {
                 .map(|i| report("robot", i, 0))
                 .collect(),
         );
-        let messages = b.take_messages(0);
+        let messages = b.take_due(false);
         assert_eq!(messages.len(), 4);
         let got: Vec<u64> = (messages.iter())
             .flat_map(|m| wire::decode_reports(m).unwrap())
             .map(|m| m.index)
             .collect();
         assert_eq!(got, (0..n).collect::<Vec<_>>());
-        assert!(!b.due(true, 0) && b.take_messages(0).is_empty() && b.since.is_none());
+        assert!(!b.due(true) && b.take_due(true).is_empty() && b.since.is_none());
     }
 
     /// Where the launcher's horizon names a run time to send from, a process sends what it
@@ -990,23 +1002,35 @@ mod tests {
             .map(|i| report("robot", i, 0))
             .collect();
         b.keep(&mut made);
-        assert!(!b.due(false, at_ns), "at the time named, not past it: kept");
-        assert!(b.due(true, at_ns), "the run waits for the horizon: due");
-        assert!(b.due(false, at_ns + 1), "past the time named: due");
-        assert_eq!(b.take_messages(at_ns + 1).len(), 2);
+        b.look(at_ns);
+        assert!(!b.due(false), "at the time named, not past it: kept");
+        assert!(b.take_due(false).is_empty());
+        assert!(b.due(true), "the run waits for the horizon: due");
+        b.look(at_ns - 1);
+        assert!(!b.due(false), "an earlier look never takes the run back");
+        b.look(at_ns + 1);
+        assert!(b.due(false), "past the time named: due");
+        assert_eq!(b.take_due(false).len(), 2);
         // Sent for that time: what is kept next waits for the next horizon's time.
         b.keep(&mut vec![report("robot", 3 * FOLLOWED_BATCH as u64, 0)]);
-        assert!(!b.due(false, u64::MAX), "nothing more for the same time");
-        assert!(
-            b.due(true, u64::MAX),
-            "but before the run waits for the horizon"
-        );
-        b.follow_from(Some(2 * at_ns));
-        assert!(!b.due(false, 2 * at_ns));
-        assert!(b.due(false, 2 * at_ns + 1));
+        b.look(u64::MAX / 2);
+        assert!(!b.due(false), "nothing more for the same time");
+        assert!(b.due(true), "but before the run waits for the horizon");
+        b.follow_from(Some(u64::MAX / 2));
+        assert!(!b.due(false));
         // Sent early (the run waited), the time still stands for what is kept after.
-        assert_eq!(b.take_messages(2 * at_ns).len(), 1);
+        assert_eq!(b.take_due(true).len(), 1);
         b.keep(&mut vec![report("robot", 3 * FOLLOWED_BATCH as u64 + 1, 0)]);
-        assert!(b.due(false, 2 * at_ns + 1));
+        assert!(!b.due(false));
+        b.look(u64::MAX / 2 + 1);
+        assert!(b.due(false));
+        // Passed with nothing kept (everything sent before a long tick): nothing more is
+        // due for that time, so the next report is not sent alone.
+        assert_eq!(b.take_due(false).len(), 1);
+        b.follow_from(Some(u64::MAX / 2 + 10));
+        b.look(u64::MAX / 2 + 11);
+        assert!(b.take_due(false).is_empty(), "nothing kept: nothing sent");
+        b.keep(&mut vec![report("robot", 3 * FOLLOWED_BATCH as u64 + 2, 0)]);
+        assert!(!b.due(false), "the time was passed already");
     }
 }

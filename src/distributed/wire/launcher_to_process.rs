@@ -106,10 +106,11 @@ pub enum ToProcess {
     Horizon {
         /// Run time, ns.
         until_ns: u64,
-        /// Linked directly: the run time from which the launcher wants the reports a
+        /// Linked directly: the run time past which the launcher wants the reports a
         /// process keeps for it ([`crate::lockstep::follow_at`]): once the process's run
-        /// reaches it, it sends what it has kept. `None` (a star, or a launcher that names
-        /// none): every [`crate::lockstep::FOLLOWED_BATCH`] reports.
+        /// passes it, it sends what it has kept. `None` in a star (whose processes send the
+        /// launcher every report as it is made, no batches); from a launcher of an earlier
+        /// ratelab, a batch every [`crate::lockstep::FOLLOWED_BATCH`] reports.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         follow_at_ns: Option<u64>,
     },
