@@ -31,7 +31,8 @@
 //! there: Zenoh's one thread must never wait to send, `launcher/outbox.rs`). The launcher
 //! is also the time authority: it lets the processes run up to a horizon
 //! ([`wire::ToProcess::Horizon`]), [`horizon_periods`] periods of the fastest node ahead of
-//! the events it has seen reported (8 when a lab paces the run; up to 256 otherwise), and ends the run early by not moving it on (a Ctrl-C).
+//! the events it has seen reported (8 when a lab paces the run; up to 256 otherwise), and
+//! ends the run early by not moving it on (a Ctrl-C).
 //!
 //! In a launch linked directly ([`crate::open_linked_peer`]) the processes are linked to each
 //! other, and a process's message of reports goes to every other process
@@ -40,8 +41,8 @@
 //! crossing sample ride on the last such sample instead ([`reports_ride_on_samples`]), so a
 //! hop is one message. The launcher hears the same reports in batches
 //! ([`subscribe_progress`], [`follow_at`]: once a process's run passes the time the
-//! horizon names, and always before it waits for the horizon), follows them as above, and moves the horizon, but hands nothing on until the
-//! end.
+//! horizon names, and always before it waits for the horizon), follows them as above, and
+//! moves the horizon, but hands nothing on until the end.
 //! Following the reports, it knows the end (a stop, a failure, a process gone) and the
 //! last seq of every topic before the processes report. Linked directly it knows them as
 //! far as the batches have come: a run it ends early (a process gone, Ctrl-C, a process
@@ -102,8 +103,9 @@ pub fn horizon_periods(order: &ratelab_runtime::runcore::Follower, paced: bool) 
 /// launcher moves the horizon on once its view of the run passes `horizon_ns −
 /// lookahead_ns / 2` ([`horizon_low`]), so that is when it must hear from every process. A
 /// process sends what it has kept once its run passes that time (it has then made every
-/// report the launcher needs from it to get there), and otherwise only before it waits for the horizon, before a
-/// tick that may be long, at its run's end, or after [`FOLLOWED_MAX_AGE`]. The other
+/// report the launcher needs from it to get there), and otherwise only before it waits for
+/// the horizon, before a tick that may be long, at its run's end, or after
+/// [`FOLLOWED_MAX_AGE`]. The other
 /// processes hear every report as it is made ([`Keys::ticked`], or on the sample it
 /// published, [`reports_ride_on_samples`]): only the launcher's view, which moves the
 /// horizon and counts the run, comes in batches, about one a process for each move of the

@@ -165,15 +165,12 @@ impl Launch<'_> {
                 // run passes where it moves the horizon on next.
                 let follow_at_ns = (relay.follows_in_batches())
                     .then(|| crate::lockstep::follow_at(want, lookahead));
+                let horizon_at = ToProcess::Horizon {
+                    until_ns: want,
+                    follow_at_ns,
+                };
                 for p in &self.names {
-                    let until_ns = want;
-                    link.tell(
-                        p,
-                        &ToProcess::Horizon {
-                            until_ns,
-                            follow_at_ns,
-                        },
-                    )?;
+                    link.tell(p, &horizon_at)?;
                 }
                 horizon = Some(want);
                 relay.set_horizon(want);
