@@ -185,8 +185,8 @@ struct Turns {
     local: Vec<usize>,
     /// The newest seq each topic's remote publisher sent, from its reports.
     sent: Vec<Option<u64>>,
-    /// How far the launcher lets the run go, ns.
-    horizon_ns: Option<u64>,
+    /// How far the launcher lets the run go, and, linked directly, the reports kept for it.
+    horizon: Horizon,
     /// The input message the next event waits for, and since when.
     awaiting: Option<(TopicId, u64, Instant)>,
     /// Reports of this process's events not yet sent.
@@ -200,10 +200,9 @@ struct Turns {
     kept_at: Option<Instant>,
     /// Where its reports go ([`crate::Keys::ticked`]).
     publisher: zenoh::pubsub::Publisher<'static>,
-    /// Linked directly: its reports sent, kept for the launcher to follow in batches.
-    followed: Option<Followed>,
-    /// The last event looked at lay past the horizon: the run waits for the launcher here.
-    at_horizon: bool,
+    /// Linked directly: where the launcher's copy of its reports goes, in batches
+    /// ([`Horizon::followed`]).
+    progress: Option<zenoh::pubsub::Publisher<'static>>,
     stop: StopFlag,
 }
 
@@ -254,11 +253,56 @@ impl Reporting {
     }
 }
 
-/// A launch linked directly: the reports sent to the other processes and not yet to the
-/// launcher, and where they go.
-struct Followed {
-    publisher: zenoh::pubsub::Publisher<'static>,
-    batch: FollowedBatch,
+/// How far the launcher lets a process's run go, and, linked directly, what the launcher
+/// wants to hear of it: one place decides both from the events the run looks at, so the
+/// reports kept for the launcher go once the run passes the time it named
+/// ([`lockstep::follow_at`]) and never wait for the horizon itself.
+#[derive(Debug, Default)]
+struct Horizon {
+    /// The latest run time the launcher lets the run reach, ns (`None`: it has not yet).
+    until_ns: Option<u64>,
+    /// The last event looked at lay past the horizon: the run waits for the launcher here.
+    waits: bool,
+    /// Linked directly: the reports sent to the other processes and not yet to the
+    /// launcher (`None` in a star, where the launcher hands every report on as it comes).
+    followed: Option<FollowedBatch>,
+}
+
+impl Horizon {
+    /// No horizon yet; `direct`: linked directly, the launcher's copy of the reports kept.
+    fn new(direct: bool) -> Self {
+        Horizon {
+            followed: direct.then(FollowedBatch::default),
+            ..Horizon::default()
+        }
+    }
+
+    /// The launcher lets the run go up to run time `until_ns` and names `follow_at_ns`
+    /// ([`Stepper::horizon`]); an older horizon than the one held, overtaken, is ignored.
+    fn moved(&mut self, until_ns: u64, follow_at_ns: Option<u64>) {
+        if self.until_ns.is_some_and(|h| h >= until_ns) {
+            return;
+        }
+        self.until_ns = Some(until_ns);
+        if let Some(b) = self.followed.as_mut() {
+            b.follow_from(follow_at_ns);
+        }
+    }
+
+    /// The run here looks at its next event, at run time `at_ns`: whether the horizon lets
+    /// it be taken (else the run waits for the launcher here, [`Horizon::waits`]). What the
+    /// run looks at is what tells the reports kept when they are due
+    /// ([`FollowedBatch::reached`]).
+    fn admits(&mut self, at_ns: u64) -> bool {
+        if let Some(b) = self.followed.as_mut() {
+            b.look(at_ns);
+        }
+        let admitted = self.until_ns.is_some_and(|h| h >= at_ns);
+        if !admitted {
+            self.waits = true;
+        }
+        admitted
+    }
 }
 
 /// The reports a process keeps for the launcher to follow ([`lockstep::follow_at`]): when
@@ -362,18 +406,14 @@ impl Stepper {
             held,
             local: share.local(),
             sent: vec![None; share.cfg.graph.topics.len()],
-            horizon_ns: None,
+            horizon: Horizon::new(progress.is_some()),
             awaiting: None,
             outbox: Vec::new(),
             tick_ns: vec![None; share.cfg.graph.nodes.len()],
             callback_ticks,
             kept_at: None,
             publisher,
-            followed: progress.map(|publisher| Followed {
-                publisher,
-                batch: FollowedBatch::default(),
-            }),
-            at_horizon: false,
+            progress,
             stop,
             share,
         };
@@ -388,14 +428,7 @@ impl Stepper {
     /// The launcher lets the run go up to run time `until_ns` and, linked directly, wants
     /// the reports kept for it once the run passes `follow_at_ns` ([`lockstep::follow_at`]).
     pub(super) fn horizon(&mut self, until_ns: u64, follow_at_ns: Option<u64>) {
-        let h = &mut self.turns.horizon_ns;
-        if h.is_some_and(|h| h >= until_ns) {
-            return; // an older horizon, overtaken
-        }
-        *h = Some(until_ns);
-        if let Some(f) = self.turns.followed.as_mut() {
-            f.batch.follow_from(follow_at_ns);
-        }
+        self.turns.horizon.moved(until_ns, follow_at_ns);
     }
 
     /// The launcher ended the run: nothing more runs here.
@@ -456,7 +489,7 @@ impl Stepper {
         self.turns.flush()?;
         // The launcher follows in batches: before the run waits for it to move the
         // horizon, and at the run's end here, it has every report made.
-        let waiting = self.turns.at_horizon || self.done || self.cursor.limit.is_some();
+        let waiting = self.turns.horizon.waits || self.done || self.cursor.limit.is_some();
         self.turns.send_followed(waiting)?;
         ran
     }
@@ -468,7 +501,7 @@ impl Stepper {
         if self.done {
             return Ok(false);
         }
-        self.turns.at_horizon = false;
+        self.turns.horizon.waits = false;
         let stop = self.turns.stop.clone();
         let mut turn = Advance {
             turns: &mut self.turns,
@@ -513,11 +546,7 @@ impl<'c> DrivePolicy<Event, Events<'c>> for Advance<'_> {
     fn turn(&mut self, _index: u64, event: Event) -> Result<Turn, DistError> {
         let t = &mut *self.turns;
         let (i, at) = event.node_at();
-        if let Some(f) = t.followed.as_mut() {
-            f.batch.look(at.0);
-        }
-        if t.horizon_ns.is_none_or(|h| h < at.0) {
-            t.at_horizon = true;
+        if !t.horizon.admits(at.0) {
             return Ok(Turn::Wait);
         }
         if t.outbox.len() >= wire::MAX_TICKS_PER_MESSAGE {
@@ -698,9 +727,9 @@ impl Turns {
         if let Some(bytes) = self.share.bridge.put_kept(Some(bytes))? {
             self.publisher.put(bytes).wait()?;
         }
-        match self.followed.as_mut() {
-            Some(f) => {
-                f.batch.keep(&mut self.outbox);
+        match self.horizon.followed.as_mut() {
+            Some(b) => {
+                b.keep(&mut self.outbox);
                 self.send_followed(false)?;
             }
             None => self.outbox.clear(),
@@ -712,11 +741,11 @@ impl Turns {
     /// due ([`FollowedBatch::due`]; `waiting`: the run waits here for the launcher, or is
     /// over).
     fn send_followed(&mut self, waiting: bool) -> Result<(), DistError> {
-        let Some(f) = self.followed.as_mut() else {
+        let (Some(batch), Some(progress)) = (self.horizon.followed.as_mut(), &self.progress) else {
             return Ok(());
         };
-        for bytes in f.batch.take_due(waiting) {
-            f.publisher.put(bytes).wait()?;
+        for bytes in batch.take_due(waiting) {
+            progress.put(bytes).wait()?;
         }
         Ok(())
     }
@@ -865,7 +894,7 @@ fn take_the_rest(
 
 #[cfg(test)]
 mod tests {
-    use super::FollowedBatch;
+    use super::{FollowedBatch, Horizon};
     use crate::lockstep::tests::report;
     use crate::lockstep::{FOLLOWED_BATCH, FOLLOWED_MAX_AGE};
     use crate::wire::{self, MAX_TICKS_PER_MESSAGE};
@@ -1032,5 +1061,63 @@ mod tests {
         assert!(b.take_due(false).is_empty(), "nothing kept: nothing sent");
         b.keep(&mut vec![report("robot", 3 * FOLLOWED_BATCH as u64 + 2, 0)]);
         assert!(!b.due(false), "the time was passed already");
+    }
+
+    /// The horizon admits an event at or before it and makes the run wait past it (and
+    /// before the launcher's first word); an older horizon, overtaken, is ignored.
+    #[test]
+    fn the_horizon_admits_what_it_reaches_and_ignores_an_older_one() {
+        for direct in [false, true] {
+            let mut h = Horizon::new(direct);
+            assert!(!h.admits(0) && h.waits, "no horizon yet: the run waits");
+            h.waits = false;
+            h.moved(1_000, Some(500));
+            assert!(
+                h.admits(0) && h.admits(1_000) && !h.waits,
+                "direct {direct}"
+            );
+            assert!(
+                !h.admits(1_001) && h.waits,
+                "past the horizon: the run waits"
+            );
+            h.moved(900, Some(450));
+            assert_eq!(h.until_ns, Some(1_000), "an older horizon changes nothing");
+            if let Some(b) = h.followed.as_ref() {
+                assert_eq!(b.follow_at_ns, Some(500), "nor the time it names");
+            }
+            h.moved(2_000, Some(1_500));
+            assert!(h.admits(1_001));
+        }
+        assert!(
+            Horizon::new(false).followed.is_none(),
+            "a star keeps nothing"
+        );
+    }
+
+    /// Linked directly, what the run looks at is what sends the launcher the reports kept
+    /// for it: once the run looks at an event past the time the horizon names, they are
+    /// due while the run is still well inside the horizon (the launcher moves the horizon on
+    /// before the run reaches it: issue 76's lockstep, the launcher woken once a horizon).
+    #[test]
+    fn looking_past_the_named_time_sends_the_launcher_its_reports_inside_the_horizon() {
+        let mut h = Horizon::new(true);
+        h.moved(1_000, Some(500));
+        h.followed
+            .as_mut()
+            .unwrap()
+            .keep(&mut vec![report("robot", 0, 0)]);
+        let due = |h: &Horizon| h.followed.as_ref().unwrap().due(h.waits);
+        assert!(h.admits(500) && !due(&h), "at the time named: kept");
+        assert!(h.admits(501) && due(&h), "past it, inside the horizon: due");
+        assert!(!h.waits);
+        assert_eq!(h.followed.as_mut().unwrap().take_due(h.waits).len(), 1);
+        // The next horizon names the next time; nothing is due until the run passes it.
+        h.moved(2_000, Some(1_500));
+        h.followed
+            .as_mut()
+            .unwrap()
+            .keep(&mut vec![report("robot", 1, 0)]);
+        assert!(h.admits(1_200) && !due(&h));
+        assert!(h.admits(1_501) && due(&h));
     }
 }
