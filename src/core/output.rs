@@ -10,6 +10,11 @@
 //!   Without `--force` the move is a hard link, which the kernel refuses atomically when the
 //!   name is taken meanwhile; with `--force` it is a `rename`, which replaces the directory
 //!   entry (a symbolic link put there meanwhile is replaced, not followed).
+//! - A recording, written over a whole run, is the exception where nothing is at its name
+//!   yet ([`PendingFile::create_in_place`]): it is created there at once, exclusively, and
+//!   written in place, so a run killed midway (`SIGKILL`, the out-of-memory killer) leaves
+//!   what it recorded under the name the user gave, as rosbag2 and rerun's own `--save` do.
+//!   Replacing a file (`--force`) still goes through a temporary file.
 //!
 //! Every error is one line naming the file, with the OS's reason where there is one.
 
@@ -91,13 +96,17 @@ pub fn check_writable(path: &Path, force: bool) -> Result<(), OutputError> {
 }
 
 /// A temporary file beside its final name, moved into place by [`PendingFile::commit`]
-/// and removed if dropped uncommitted.
+/// and removed if dropped uncommitted; or a new file written at its final name
+/// ([`PendingFile::create_in_place`]).
 #[derive(Debug)]
 pub struct PendingFile {
+    /// Where the file is written: beside `dest`, or `dest` itself when written in place.
     tmp: PathBuf,
     dest: PathBuf,
     force: bool,
     done: bool,
+    /// Written at `dest` from the start: committing moves nothing.
+    in_place: bool,
 }
 
 impl PendingFile {
@@ -124,19 +133,7 @@ impl PendingFile {
         use std::os::unix::fs::OpenOptionsExt as _;
         static COUNTER: AtomicU64 = AtomicU64::new(0);
         check_target(dest, force)?;
-        let name = dest
-            .file_name()
-            .ok_or_else(|| OutputError::Io {
-                path: dest.to_path_buf(),
-                detail: "not a file name".into(),
-                kind: std::io::ErrorKind::InvalidInput,
-            })?
-            .to_string_lossy()
-            .into_owned();
-        let dir = match dest.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
+        let (name, dir) = name_and_folder(dest)?;
         std::fs::create_dir_all(&dir).map_err(|e| OutputError::io(dest, &e))?;
         let tmp = dir.join(format!(
             ".{name}.{}-{}.tmp",
@@ -155,12 +152,52 @@ impl PendingFile {
                 dest: dest.to_path_buf(),
                 force,
                 done: false,
+                in_place: false,
             },
             file,
         ))
     }
 
-    /// The temporary file's path (for writers that open the file themselves).
+    /// [`PendingFile::create`] for a file written over a long time that should outlive a
+    /// writer killed midway (a recording). Where nothing is at `dest`, the file is created
+    /// there at once, exclusively (a name taken meanwhile is refused), and written in place:
+    /// whatever was written before a `SIGKILL` is at the name the user gave, and
+    /// [`PendingFile::commit`] moves nothing. Where a regular file is there (`force`), it
+    /// is written beside and moved into place, as [`PendingFile::create`] does, so the old
+    /// file stays whole until the new one is.
+    ///
+    /// # Errors
+    /// [`OutputError`] from the check or the creation ([`OutputError::Exists`] when the name
+    /// is taken between the two).
+    pub fn create_in_place(dest: &Path, force: bool) -> Result<(Self, std::fs::File), OutputError> {
+        check_target(dest, force)?;
+        if std::fs::symlink_metadata(dest).is_ok() {
+            return Self::create(dest, force); // replacing a file: beside, then moved
+        }
+        let (_, dir) = name_and_folder(dest)?;
+        std::fs::create_dir_all(&dir).map_err(|e| OutputError::io(dest, &e))?;
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(dest)
+            .map_err(|e| match e.kind() {
+                std::io::ErrorKind::AlreadyExists => OutputError::Exists(dest.to_path_buf()),
+                _ => OutputError::io(dest, &e),
+            })?;
+        Ok((
+            Self {
+                tmp: dest.to_path_buf(),
+                dest: dest.to_path_buf(),
+                force,
+                done: false,
+                in_place: true,
+            },
+            file,
+        ))
+    }
+
+    /// The file's path while it is written (for writers that open the file themselves): a
+    /// temporary name beside the final one, or the final one when written in place.
     pub fn temp_path(&self) -> &Path {
         &self.tmp
     }
@@ -181,6 +218,9 @@ impl PendingFile {
             return Ok(());
         }
         self.done = true;
+        if self.in_place {
+            return Ok(()); // written where it belongs
+        }
         let result = self.move_into_place();
         let _ = std::fs::remove_file(&self.tmp);
         result
@@ -204,6 +244,27 @@ impl PendingFile {
             Err(e) => Err(OutputError::io(&self.dest, &e)),
         }
     }
+}
+
+/// `dest`'s file name and its folder (`.` for a bare name).
+///
+/// # Errors
+/// [`OutputError::Io`] when `dest` names no file (`/`, `..`).
+fn name_and_folder(dest: &Path) -> Result<(String, PathBuf), OutputError> {
+    let name = dest
+        .file_name()
+        .ok_or_else(|| OutputError::Io {
+            path: dest.to_path_buf(),
+            detail: "not a file name".into(),
+            kind: std::io::ErrorKind::InvalidInput,
+        })?
+        .to_string_lossy()
+        .into_owned();
+    let dir = match dest.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    Ok((name, dir))
 }
 
 impl Drop for PendingFile {
@@ -344,6 +405,65 @@ mod tests {
         assert!(matches!(pending.commit(), Err(OutputError::Exists(_))));
         assert_eq!(std::fs::read(&f).unwrap(), b"someone else's");
         assert!(!pending.temp_path().exists());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// A recording where nothing is at its name is written there from the start (a writer
+    /// killed midway leaves it under that name) and is never moved; a second writer of
+    /// the same name is refused; a file replaced (`--force`) is written beside and the old
+    /// one stays whole until the new one is committed; links and folders are refused.
+    #[test]
+    fn a_new_recording_is_written_in_place_and_a_replaced_one_beside() {
+        let d = scratch("in-place");
+        let f = d.join("sub").join("rec.rrd");
+        let (mut pending, mut file) = PendingFile::create_in_place(&f, false).unwrap();
+        assert_eq!(pending.temp_path(), f, "written at its name");
+        file.write_all(b"part").unwrap();
+        assert_eq!(
+            std::fs::read(&f).unwrap(),
+            b"part",
+            "there before it is finished"
+        );
+        for force in [false, true] {
+            // The name is taken now (by the file being written): without --force refused;
+            // with it, beside.
+            let other = PendingFile::create_in_place(&f, force);
+            if force {
+                let (p, _) = other.unwrap();
+                assert_ne!(p.temp_path(), f);
+            } else {
+                assert!(matches!(other, Err(OutputError::Exists(_))));
+            }
+        }
+        drop(file);
+        pending.commit().unwrap();
+        pending.commit().unwrap();
+        assert_eq!(std::fs::read(&f).unwrap(), b"part");
+        // Replaced with --force: the old file is whole until the new one is moved there.
+        let (mut pending, mut file) = PendingFile::create_in_place(&f, true).unwrap();
+        file.write_all(b"new").unwrap();
+        assert_eq!(std::fs::read(&f).unwrap(), b"part");
+        drop(file);
+        pending.commit().unwrap();
+        assert_eq!(std::fs::read(&f).unwrap(), b"new");
+        let link = d.join("link.rrd");
+        std::os::unix::fs::symlink(&f, &link).unwrap();
+        for force in [false, true] {
+            assert!(matches!(
+                PendingFile::create_in_place(&link, force),
+                Err(OutputError::Symlink(_))
+            ));
+            assert!(matches!(
+                PendingFile::create_in_place(&d, force),
+                Err(OutputError::NotRegular { .. })
+            ));
+        }
+        assert_eq!(std::fs::read(&f).unwrap(), b"new");
+        let left: Vec<_> = std::fs::read_dir(d.join("sub"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(left, ["rec.rrd"], "no temporary file left");
         std::fs::remove_dir_all(&d).unwrap();
     }
 }

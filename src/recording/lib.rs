@@ -637,7 +637,9 @@ impl Recording {
         opts: &RecordOptions,
         force: bool,
     ) -> Result<(Self, Option<String>), RecordingError> {
-        let (pending, file) = ratelab_core::output::PendingFile::create(path, force)?;
+        // Written at its name from the start where nothing is there: a run killed midway
+        // leaves what it recorded where the user asked (the module's rule).
+        let (pending, file) = ratelab_core::output::PendingFile::create_in_place(path, force)?;
         drop(file);
         let tmp = pending.temp_path().to_path_buf();
         let mut builder = RecordingStreamBuilder::new(APP_ID);

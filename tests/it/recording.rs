@@ -277,6 +277,74 @@ fn a_run_cut_short_leaves_a_complete_file() {
     assert_eq!(r.metrics.steps, 100);
 }
 
+/// The chunks of a recording that may stop midway (its writer killed, or still writing):
+/// every whole message, in file order, up to the first that does not read.
+fn chunks_so_far(path: &Path) -> Vec<Chunk> {
+    let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+    let mut read = Vec::new();
+    for msg in re_log_encoding::DecoderApp::decode_lazy(file) {
+        let Ok(msg) = msg else { break };
+        if let LogMsg::ArrowMsg(store, arrow) = msg {
+            if store.kind() == StoreKind::Recording {
+                read.push(Chunk::from_arrow_msg(&arrow).unwrap());
+            }
+        }
+    }
+    read
+}
+
+/// A run killed outright (`SIGKILL`: nothing of ratelab runs after it, as under the
+/// out-of-memory killer) leaves what it recorded under the name asked for, nothing hidden
+/// beside it, and the file reads back up to where it stopped (and reads while written).
+#[test]
+fn a_recording_killed_midway_is_at_its_name_and_reads_back() {
+    use std::time::{Duration, Instant};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("killed.rrd");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
+        .args(["run", "--clock", "real", "--duration", "120", "--record"])
+        .arg(&path)
+        .current_dir(dir.path())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Until the pole's angle has reached the file (sent every FLUSH_EVERY_STEPS actuator
+    // steps: 5 s at 50 Hz), at most 60 s.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let seen = loop {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the run ended before it was killed"
+        );
+        let rows = if path.exists() {
+            angle_rows(&chunks_so_far(&path))
+        } else {
+            0
+        };
+        if rows >= 50 {
+            break rows;
+        }
+        if Instant::now() > deadline {
+            child.kill().unwrap();
+            panic!("{rows} angle rows at {} after 60 s", path.display());
+        }
+        std::thread::sleep(Duration::from_millis(250));
+    };
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names, ["killed.rrd"], "nothing beside it");
+    let rows = angle_rows(&chunks_so_far(&path));
+    assert!(
+        rows >= seen,
+        "{rows} angle rows after the kill, {seen} before"
+    );
+}
+
 fn ratelab(args: &[&str], cwd: &Path) -> std::process::Output {
     std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
         .args(args)
