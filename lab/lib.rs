@@ -388,7 +388,7 @@ fn handle_signals() {
                 let _ = crossterm::terminal::disable_raw_mode();
                 if say {
                     eprintln!(
-                        "ratelab: interrupted again: exiting at once, without a summary or files"
+                        "ratelab: interrupted again: exiting at once, without a summary or files (a recording keeps what it had written)"
                     );
                 }
                 std::process::exit(i32::from(EXIT_INTERRUPTED));

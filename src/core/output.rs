@@ -14,7 +14,10 @@
 //!   yet ([`PendingFile::create_in_place`]): it is created there at once, exclusively, and
 //!   written in place, so a run killed midway (`SIGKILL`, the out-of-memory killer) leaves
 //!   what it recorded under the name the user gave, as rosbag2 and rerun's own `--save` do.
-//!   Replacing a file (`--force`) still goes through a temporary file.
+//!   The file is held open and reopened only through its descriptor (`/proc/self/fd/N`),
+//!   never by its name, so a link or FIFO put at the name meanwhile is never written
+//!   through; a file found replaced at the end is said so. Replacing a file (`--force`)
+//!   still goes through a temporary file.
 //!
 //! Every error is one line naming the file, with the OS's reason where there is one.
 
@@ -39,6 +42,10 @@ pub enum OutputError {
         /// What it is.
         kind: &'static str,
     },
+    /// A file written in place ([`PendingFile::create_in_place`]) was replaced at its name
+    /// (moved over, or removed) while it was written: what was written is not there.
+    #[error("{0}: replaced or removed by something else while it was written; what was written there is lost")]
+    Replaced(PathBuf),
     /// An I/O error while creating, writing or moving the file.
     #[error("cannot write {path}: {detail}")]
     Io {
@@ -105,8 +112,9 @@ pub struct PendingFile {
     dest: PathBuf,
     force: bool,
     done: bool,
-    /// Written at `dest` from the start: committing moves nothing.
-    in_place: bool,
+    /// Written at `dest` from the start: the file, held open (what is at `dest` is checked
+    /// against it, and a writer reopens it by its descriptor); committing moves nothing.
+    in_place: Option<std::fs::File>,
 }
 
 impl PendingFile {
@@ -152,7 +160,7 @@ impl PendingFile {
                 dest: dest.to_path_buf(),
                 force,
                 done: false,
-                in_place: false,
+                in_place: None,
             },
             file,
         ))
@@ -160,15 +168,17 @@ impl PendingFile {
 
     /// [`PendingFile::create`] for a file written over a long time that should outlive a
     /// writer killed midway (a recording). Where nothing is at `dest`, the file is created
-    /// there at once, exclusively (a name taken meanwhile is refused), and written in place:
-    /// whatever was written before a `SIGKILL` is at the name the user gave, and
-    /// [`PendingFile::commit`] moves nothing. Where a regular file is there (`force`), it
-    /// is written beside and moved into place, as [`PendingFile::create`] does, so the old
-    /// file stays whole until the new one is.
+    /// there at once, exclusively, and written in place: whatever was written before a
+    /// `SIGKILL` is at the name the user gave, and [`PendingFile::commit`] moves nothing (it
+    /// checks that the name is still this file's). A writer that opens the file itself
+    /// opens [`PendingFile::write_path`], never the name. Where a regular file is there
+    /// (`force`), or one appears there meanwhile (`force`), it is written beside and moved
+    /// into place, as [`PendingFile::create`] does, so the old file stays whole until the
+    /// new one is.
     ///
     /// # Errors
     /// [`OutputError`] from the check or the creation ([`OutputError::Exists`] when the name
-    /// is taken between the two).
+    /// is taken between the two without `force`).
     pub fn create_in_place(dest: &Path, force: bool) -> Result<(Self, std::fs::File), OutputError> {
         check_target(dest, force)?;
         if std::fs::symlink_metadata(dest).is_ok() {
@@ -176,24 +186,65 @@ impl PendingFile {
         }
         let (_, dir) = name_and_folder(dest)?;
         std::fs::create_dir_all(&dir).map_err(|e| OutputError::io(dest, &e))?;
-        let file = std::fs::OpenOptions::new()
+        // create_new: never through a link or FIFO, nor over a file, put there since the check.
+        let file = match std::fs::OpenOptions::new()
             .write(true)
             .create_new(true)
             .open(dest)
-            .map_err(|e| match e.kind() {
-                std::io::ErrorKind::AlreadyExists => OutputError::Exists(dest.to_path_buf()),
-                _ => OutputError::io(dest, &e),
-            })?;
+        {
+            Ok(f) => f,
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && force => {
+                return Self::create(dest, force); // a file there now: replaced, as above
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                return Err(OutputError::Exists(dest.to_path_buf()));
+            }
+            Err(e) => return Err(OutputError::io(dest, &e)),
+        };
+        let held = file.try_clone().map_err(|e| OutputError::io(dest, &e))?;
         Ok((
             Self {
                 tmp: dest.to_path_buf(),
                 dest: dest.to_path_buf(),
                 force,
                 done: false,
-                in_place: true,
+                in_place: Some(held),
             },
             file,
         ))
+    }
+
+    /// The path a writer that opens the file itself (rerun's file sink) should open: the
+    /// temporary file; for a file written in place, the open file through its descriptor
+    /// (`/proc/self/fd/N`, Linux's name for exactly that file), so that whatever is put at
+    /// the final name meanwhile (a link, a FIFO, another file) is never opened. Without
+    /// `/proc`, the final name itself.
+    pub fn write_path(&self) -> PathBuf {
+        use std::os::fd::AsRawFd as _;
+        match &self.in_place {
+            Some(f) => {
+                let by_fd = PathBuf::from(format!("/proc/self/fd/{}", f.as_raw_fd()));
+                if by_fd.exists() {
+                    by_fd
+                } else {
+                    self.dest.clone()
+                }
+            }
+            None => self.tmp.clone(),
+        }
+    }
+
+    /// Written in place: whether the final name still holds this file (the same device and
+    /// inode, not through a link).
+    fn still_ours(&self) -> bool {
+        use std::os::unix::fs::MetadataExt as _;
+        let Some(f) = &self.in_place else {
+            return false;
+        };
+        match (f.metadata(), std::fs::symlink_metadata(&self.dest)) {
+            (Ok(ours), Ok(there)) => ours.dev() == there.dev() && ours.ino() == there.ino(),
+            _ => false,
+        }
     }
 
     /// The file's path while it is written (for writers that open the file themselves): a
@@ -207,19 +258,24 @@ impl PendingFile {
         &self.dest
     }
 
-    /// Move the temporary file to its final name (see the module's rule). Committing twice
-    /// does nothing.
+    /// Move the temporary file to its final name (see the module's rule); a file written in
+    /// place is where it belongs, and only checked. Committing twice does nothing.
     ///
     /// # Errors
     /// [`OutputError`]: the name was taken meanwhile (without `force`), a link or
     /// non-regular file appeared there, or the move failed; the temporary file is removed.
+    /// Written in place: [`OutputError::Replaced`] when the name no longer holds the file.
     pub fn commit(&mut self) -> Result<(), OutputError> {
         if self.done {
             return Ok(());
         }
         self.done = true;
-        if self.in_place {
-            return Ok(()); // written where it belongs
+        if self.in_place.is_some() {
+            return if self.still_ours() {
+                Ok(())
+            } else {
+                Err(OutputError::Replaced(self.dest.clone()))
+            };
         }
         let result = self.move_into_place();
         let _ = std::fs::remove_file(&self.tmp);
@@ -269,7 +325,9 @@ fn name_and_folder(dest: &Path) -> Result<(String, PathBuf), OutputError> {
 
 impl Drop for PendingFile {
     fn drop(&mut self) {
-        if !self.done {
+        // Written in place: removed only while the name still holds this file, never
+        // whatever was put there since.
+        if !self.done && (self.in_place.is_none() || self.still_ours()) {
             let _ = std::fs::remove_file(&self.tmp);
         }
     }
@@ -464,6 +522,53 @@ mod tests {
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
             .collect();
         assert_eq!(left, ["rec.rrd"], "no temporary file left");
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// A file written in place is reopened by its descriptor, never by its name: a link
+    /// put at the name while it is written is not written through, and the end says the
+    /// file was replaced (and removes nothing that is not the file). Moved over by another
+    /// file: said at the end, the other file kept.
+    #[test]
+    fn a_file_written_in_place_is_never_reopened_by_its_name() {
+        let d = scratch("by-fd");
+        let f = d.join("rec.rrd");
+        let victim = d.join("victim");
+        std::fs::write(&victim, b"canary").unwrap();
+        let (mut pending, _file) = PendingFile::create_in_place(&f, false).unwrap();
+        let by = pending.write_path();
+        assert!(by.starts_with("/proc/self/fd/"), "{}", by.display());
+        // Someone puts a link at the name; the writer then opens its path (as rerun does,
+        // `File::create`: truncating, following links).
+        std::fs::rename(&f, d.join("moved-away.rrd")).unwrap();
+        std::os::unix::fs::symlink(&victim, &f).unwrap();
+        std::fs::File::create(&by)
+            .unwrap()
+            .write_all(b"rows")
+            .unwrap();
+        assert_eq!(
+            std::fs::read(&victim).unwrap(),
+            b"canary",
+            "never through the link"
+        );
+        assert_eq!(std::fs::read(d.join("moved-away.rrd")).unwrap(), b"rows");
+        assert!(matches!(pending.commit(), Err(OutputError::Replaced(_))));
+        assert!(std::fs::symlink_metadata(&f)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        // Dropped uncommitted with another file at its name: that file is left alone.
+        std::fs::remove_file(&f).unwrap();
+        let (pending, _file) = PendingFile::create_in_place(&f, false).unwrap();
+        std::fs::write(d.join("other"), b"theirs").unwrap();
+        std::fs::rename(d.join("other"), &f).unwrap();
+        drop(pending);
+        assert_eq!(std::fs::read(&f).unwrap(), b"theirs");
+        // Dropped uncommitted while the name still holds it: removed, as a temporary file is.
+        std::fs::remove_file(&f).unwrap();
+        let (pending, _file) = PendingFile::create_in_place(&f, false).unwrap();
+        drop(pending);
+        assert!(!f.exists());
         std::fs::remove_dir_all(&d).unwrap();
     }
 }

@@ -1,6 +1,7 @@
 //! Where recordings go and how their files are written: the default names (the graph, the
 //! clock, the settings), the first free name in a folder, the output rule
-//! ([`ratelab_core::output`]: a temporary file moved into place, replaced only with `--force`), the
+//! ([`ratelab_core::output`]: written at its name from the start, replaced only with `--force`,
+//! through a temporary file moved into place), the
 //! reason a full disk gives, the recording id a virtual run derives from its settings, the
 //! run's name and settings in a line, and the name of its time timeline.
 
@@ -61,7 +62,9 @@ pub fn check_output_path(path: &Path, force: bool) -> Result<(), RecordingError>
     Ok(ratelab_core::output::check_writable(path, force)?)
 }
 
-/// Moves a recording's temporary file into place once, when finished or dropped.
+/// Commits a recording's file once, when finished or dropped: moves it into place when it
+/// replaces a file, else checks that its name still holds it
+/// ([`ratelab_core::output::PendingFile::commit`]).
 pub(super) struct Committer(pub(super) Mutex<Option<ratelab_core::output::PendingFile>>);
 
 impl Committer {

@@ -107,10 +107,13 @@
 //! write recordings that `rerun rrd compare` finds identical. (Per-node lateness, real clock
 //! only, is logged from the node threads through the ordinary batcher.)
 //!
-//! Files follow [`ratelab_core::output`]'s rule: rerun writes a temporary file beside the final
-//! name (`.<name>.<pid>-<n>.tmp`), moved into place when the recording is finished (or
-//! dropped); an existing file is replaced only when the recording was opened with
-//! `force`, and a symbolic link or non-regular file at the final name is refused.
+//! Files follow [`ratelab_core::output`]'s rule for recordings: a new recording is written at
+//! its name from the start (created there exclusively, and reopened by rerun through its
+//! descriptor, never by the name), so a run killed outright leaves what it recorded there;
+//! an existing file is replaced only when the recording was opened with `force`, through a
+//! temporary file beside it (`.<name>.<pid>-<n>.tmp`) moved into place when the recording
+//! is finished (or dropped); a symbolic link or non-regular file at the final name is
+//! refused.
 #![warn(missing_docs)]
 // The crate's docs map its private modules for a maintainer: links to them are meant.
 #![allow(rustdoc::private_intra_doc_links)]
@@ -504,7 +507,8 @@ pub struct Recording {
     last_step_published: Arc<Mutex<BTreeMap<String, u64>>>,
     /// The graph, once the observer is attached (for the final layout).
     shape: Arc<Mutex<Option<GraphShape>>>,
-    /// The temporary file rerun writes, moved to `path` by [`Recording::finish`].
+    /// The file rerun writes: at `path` from the start, or (replacing a file) beside it and
+    /// moved to `path` by [`Recording::finish`].
     file: Arc<Committer>,
     /// Per node (by index): the release of its last tick logged and the periods its timer
     /// skipped so far ([`Recording::node_span`]).
@@ -641,7 +645,8 @@ impl Recording {
         // leaves what it recorded where the user asked (the module's rule).
         let (pending, file) = ratelab_core::output::PendingFile::create_in_place(path, force)?;
         drop(file);
-        let tmp = pending.temp_path().to_path_buf();
+        // Rerun opens the file itself: by its descriptor where it is written in place.
+        let tmp = pending.write_path();
         let mut builder = RecordingStreamBuilder::new(APP_ID);
         if let Some(id) = deterministic_id(cfg) {
             builder = builder
@@ -1020,13 +1025,14 @@ impl Recording {
     }
 
     /// Log the end of the run (an event and the summary document) at its end time, flush
-    /// and close the file and move it into place, so the recording is complete whichever
-    /// way the run ended. Nothing is logged to it after this.
+    /// and close the file and (replacing a file) move it into place, so the recording is
+    /// complete whichever way the run ended. Nothing is logged to it after this.
     ///
     /// # Errors
     /// [`RecordingError::Rerun`] when the flush fails or the file's end could not be
     /// written ([`Recording::close`]), [`RecordingError`] when the file cannot be moved into
-    /// place (e.g. its name was taken meanwhile, without `force`).
+    /// place (e.g. its name was taken meanwhile, without `force`) or, written in place, was
+    /// replaced at its name meanwhile.
     pub fn finish(&self, metrics: &Metrics, end: &RunEnd) -> Result<(), RecordingError> {
         let summary = metrics.summary_lines(None);
         let level = match end.reason {
@@ -1243,8 +1249,8 @@ mod tests {
             "--record file exists: r.rrd (pass --force to overwrite)",
             "record: r.rrd: file exists (pass force=True to overwrite)",
         );
-        // A symbolic link put at the final name while the run went, found as the recording
-        // is moved into place when it ends: no flag in Python.
+        // A symbolic link put at the final name while the run went, found as a recording
+        // that replaces a file is moved into place when it ends: no flag in Python.
         let moved = RecordingError::from(OutputError::Symlink(p()));
         assert!(moved.said(Speech::Flags).starts_with("--record "));
         let said = moved.said(Speech::Keywords);

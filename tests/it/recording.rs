@@ -299,22 +299,33 @@ fn chunks_so_far(path: &Path) -> Vec<Chunk> {
 #[test]
 fn a_recording_killed_midway_is_at_its_name_and_reads_back() {
     use std::time::{Duration, Instant};
+    /// The run, killed however the test ends.
+    struct Killed(std::process::Child);
+    impl Drop for Killed {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+    let _machine = crate::machine::shared();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("killed.rrd");
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
-        .args(["run", "--clock", "real", "--duration", "120", "--record"])
-        .arg(&path)
-        .current_dir(dir.path())
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut child = Killed(
+        std::process::Command::new(env!("CARGO_BIN_EXE_ratelab"))
+            .args(["run", "--clock", "real", "--duration", "120", "--record"])
+            .arg(&path)
+            .current_dir(dir.path())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
     // Until the pole's angle has reached the file (sent every FLUSH_EVERY_STEPS actuator
     // steps: 5 s at 50 Hz), at most 60 s.
     let deadline = Instant::now() + Duration::from_secs(60);
     let seen = loop {
         assert!(
-            child.try_wait().unwrap().is_none(),
+            child.0.try_wait().unwrap().is_none(),
             "the run ended before it was killed"
         );
         let rows = if path.exists() {
@@ -325,14 +336,15 @@ fn a_recording_killed_midway_is_at_its_name_and_reads_back() {
         if rows >= 50 {
             break rows;
         }
-        if Instant::now() > deadline {
-            child.kill().unwrap();
-            panic!("{rows} angle rows at {} after 60 s", path.display());
-        }
+        assert!(
+            Instant::now() < deadline,
+            "{rows} angle rows at {} after 60 s",
+            path.display()
+        );
         std::thread::sleep(Duration::from_millis(250));
     };
-    child.kill().unwrap(); // SIGKILL
-    child.wait().unwrap();
+    child.0.kill().unwrap(); // SIGKILL
+    child.0.wait().unwrap();
     let names: Vec<String> = std::fs::read_dir(dir.path())
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
