@@ -488,7 +488,7 @@ pub fn run_command_line(args: Vec<std::ffi::OsString>, register: impl FnOnce()) 
             print!("{}", ratelab::msg::types_table());
             Ok(())
         }
-        Some(Command::Ros2(args)) => ros2::run(args, stop),
+        Some(Command::Ros2(args)) => ros2::run(args, cli.headless, stop),
         Some(Command::Graph(args)) => generate_graph(args),
         // Served above, before ratelab's signal handling.
         Some(Command::RenderCamera(_)) => Ok(()),

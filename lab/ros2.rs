@@ -29,6 +29,13 @@ pub struct Ros2Args {
     /// nothing.
     #[arg(long, global = true)]
     pub no_daemon: bool,
+    /// The program's global `--headless`, which means nothing here (ros2cli's verbs print
+    /// as they go, with no lab to leave out): declared on `ros2` itself, hidden, so that
+    /// clap neither shows it in any `ros2` help nor hands it down to the verbs, which refuse
+    /// it as any flag they do not know; given before the verb (or before `ros2`), [`run`]
+    /// refuses it.
+    #[arg(long, hide = true)]
+    pub headless: bool,
     /// What to read.
     #[command(subcommand)]
     pub what: Ros2Command,
@@ -398,14 +405,20 @@ fn warn(w: &str) {
     let _ = writeln!(std::io::stderr(), "{w}");
 }
 
-/// Run `ratelab ros2 …` until done or `stop` (Ctrl-C).
+/// Run `ratelab ros2 …` until done or `stop` (Ctrl-C); `headless`: the program's
+/// `--headless` was given before `ros2`.
 ///
 /// # Errors
-/// One line: a bad domain or wait, no router; what ros2cli refuses with exit 1 as
+/// One line: `--headless` given, a bad domain or wait, no router; what ros2cli refuses with exit 1 as
 /// [`Refused`] (an unknown node or topic, a parameter not set, a topic of two types to
 /// `echo`, `hz` or `bw`, a topic no node has to `echo`); `echo`, `hz` or `bw` stopped by
 /// Ctrl-C as [`Interrupted`], with ros2cli's exit code.
-pub fn run(args: &Ros2Args, stop: StopFlag) -> Result<()> {
+pub fn run(args: &Ros2Args, headless: bool, stop: StopFlag) -> Result<()> {
+    if headless || args.headless {
+        anyhow::bail!(
+            "--headless: `ratelab ros2` prints as ros2cli does, with no lab to run headless"
+        );
+    }
     if let Ros2Command::Bag(verb) = &args.what {
         // A bag is read from its files: the graph's settings would change nothing (record
         // and play are refused for what they are first).

@@ -153,6 +153,40 @@ fn a_misspelled_flag_or_command_is_told_the_near_name_in_its_one_line() {
     );
 }
 
+/// `ratelab ros2` is ros2cli's command set: the program's `--headless` is neither in its
+/// help nor taken by it, wherever it is put (it used to be listed and silently taken).
+#[test]
+fn ros2_neither_lists_nor_takes_headless() {
+    for help in [
+        &["ros2", "--help"][..],
+        &["ros2", "topic", "--help"],
+        &["ros2", "topic", "list", "--help"],
+        &["ros2", "bag", "info", "--help"],
+    ] {
+        let o = ratelab(help);
+        assert!(o.status.success(), "{help:?}");
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(!text.contains("--headless"), "{help:?}: {text}");
+        assert!(
+            text.contains("--domain"),
+            "{help:?}: its own flags still shown"
+        );
+    }
+    let run = ratelab(&["run", "--help"]);
+    assert!(String::from_utf8_lossy(&run.stdout).contains("--headless"));
+    assert_usage_error(
+        &["ros2", "topic", "list", "--headless"],
+        "error: unexpected argument '--headless' found",
+    );
+    for before in [&["ros2", "--headless"][..], &["--headless", "ros2"]] {
+        let args: Vec<&str> = before.iter().chain(&["topic", "list"]).copied().collect();
+        assert_usage_error(
+            &args,
+            "error: --headless: `ratelab ros2` prints as ros2cli does, with no lab to run headless",
+        );
+    }
+}
+
 #[test]
 fn bad_rt_priorities_are_refused() {
     for bad in ["0", "100", "-1", "256", "high"] {
