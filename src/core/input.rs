@@ -7,7 +7,8 @@
 //! slip a FIFO in). The read itself stops one byte past the cap, whatever the file claims.
 //!
 //! A stream read a line at a time (another process's stderr) is read in bounded lines:
-//! [`read_line_bounded`].
+//! [`read_line_bounded`]. A file that must be text and is not says where it stops being
+//! UTF-8 ([`utf8_text`]), so a stray byte can be found in a long file.
 
 use std::io::Read;
 use std::os::unix::fs::OpenOptionsExt;
@@ -125,6 +126,49 @@ pub fn read_regular_file(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputEr
     Ok(bytes)
 }
 
+/// Where a file's bytes stop being UTF-8 text: the first byte that is not, its 1-based line
+/// and its 1-based column (characters of valid text before it on its line, plus one).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("not UTF-8 text (byte {byte:#04x} at line {line}, column {col})")]
+pub struct NotUtf8 {
+    /// The first byte that is not UTF-8 (of a sequence cut short: the last byte there is).
+    pub byte: u8,
+    /// Its line, from 1.
+    pub line: usize,
+    /// Its column on that line, in characters, from 1.
+    pub col: usize,
+}
+
+/// `bytes` as text, or where they stop being UTF-8.
+///
+/// # Errors
+/// [`NotUtf8`] at the first byte that is not.
+pub fn utf8_text(bytes: Vec<u8>) -> Result<String, NotUtf8> {
+    String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        not_utf8(e.as_bytes(), at)
+    })
+}
+
+/// [`utf8_text`] for borrowed bytes.
+///
+/// # Errors
+/// As [`utf8_text`].
+pub fn utf8_str(bytes: &[u8]) -> Result<&str, NotUtf8> {
+    std::str::from_utf8(bytes).map_err(|e| not_utf8(bytes, e.valid_up_to()))
+}
+
+/// The place of `bytes[at]`, the first byte that is not UTF-8 (`bytes[..at]` is).
+fn not_utf8(bytes: &[u8], at: usize) -> NotUtf8 {
+    let valid = std::str::from_utf8(&bytes[..at]).unwrap_or_default();
+    let line_start = valid.rfind('\n').map_or(0, |i| i + 1);
+    NotUtf8 {
+        byte: bytes.get(at).copied().unwrap_or_default(),
+        line: valid.matches('\n').count() + 1,
+        col: valid[line_start..].chars().count() + 1,
+    }
+}
+
 /// Read the next line of `r` into `buf` (cleared first), at most `max` bytes of it with
 /// its `\n` when that fits; the rest of a longer line is skipped without being held. So a
 /// stream that never ends a line costs `max` bytes, not all it sends. `Ok(false)` at the
@@ -152,6 +196,34 @@ pub fn read_line_bounded(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A file that stops being UTF-8 says where: the byte, its line and its column in
+    /// characters (a multi-byte character before it on its line counts once).
+    #[test]
+    fn text_that_is_not_utf8_says_where() {
+        assert_eq!(utf8_text(b"a\nb".to_vec()).unwrap(), "a\nb");
+        let e = utf8_text(b"name = \"\xff\"\n".to_vec()).unwrap_err();
+        assert_eq!((e.byte, e.line, e.col), (0xff, 1, 9));
+        assert_eq!(
+            e.to_string(),
+            "not UTF-8 text (byte 0xff at line 1, column 9)"
+        );
+        let e = utf8_str(
+            "one\ntwo\nθ = "
+                .as_bytes()
+                .iter()
+                .chain(b"\xfe")
+                .copied()
+                .collect::<Vec<_>>()
+                .as_slice(),
+        )
+        .unwrap_err();
+        assert_eq!((e.byte, e.line, e.col), (0xfe, 3, 5));
+        // A sequence cut short by the end of the file: where it starts.
+        let e = utf8_str(b"ok\n\xe2\x82").unwrap_err();
+        assert_eq!((e.byte, e.line, e.col), (0xe2, 2, 1));
+        assert_eq!(utf8_str(b"\x80").unwrap_err().col, 1);
+    }
 
     #[test]
     fn a_line_is_read_to_its_bound_and_its_rest_skipped() {

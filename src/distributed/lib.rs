@@ -527,14 +527,8 @@ pub fn live_tokens(
 /// # Errors
 /// [`DistError::Usage`], one line: not UTF-8, or not a graph file.
 pub(crate) fn graph_file(bytes: &[u8], origin: &str) -> Result<GraphSpec, DistError> {
-    let text = std::str::from_utf8(bytes).map_err(|_| {
-        DistError::Graph(ratelab_runtime::graph::spec::SpecError {
-            origin: origin.to_string(),
-            line: 0,
-            col: 0,
-            reason: "not UTF-8 text".into(),
-        })
-    })?;
+    let text = ratelab_core::input::utf8_str(bytes)
+        .map_err(|e| DistError::Graph(ratelab_runtime::graph::spec::not_utf8(origin, e)))?;
     Ok(GraphSpec::parse(text, origin)?)
 }
 

@@ -259,9 +259,9 @@ const MAX_FILE_BYTES: u64 = 1 << 20;
 
 fn read_text(path: &Path) -> Result<String, ExerciseError> {
     let bytes = ratelab_core::input::read_regular_file(path, MAX_FILE_BYTES)?;
-    String::from_utf8(bytes).map_err(|_| ExerciseError::Parse {
+    ratelab_core::input::utf8_text(bytes).map_err(|e| ExerciseError::Parse {
         path: path.display().to_string(),
-        detail: "not UTF-8 text".into(),
+        detail: e.to_string(),
     })
 }
 
@@ -1146,7 +1146,7 @@ mod tests {
         assert!(ExerciseFile::load(&binary)
             .unwrap_err()
             .to_string()
-            .ends_with("not UTF-8 text"));
+            .ends_with("not UTF-8 text (byte 0xff at line 1, column 1)"));
     }
 
     #[test]

@@ -1314,7 +1314,10 @@ fn process_and_router_say_a_broken_graph_file_as_every_command_does() {
     let connect = ["--connect", "tls/127.0.0.1:9", "--credentials", creds];
     for (file, said) in [
         (broken, format!("{broken}:2:8: error: ")),
-        (binary, format!("error: {binary}: not UTF-8 text")),
+        (
+            binary,
+            format!("error: {binary}:1:9: not UTF-8 text (byte 0xff)"),
+        ),
     ] {
         let process = ratelab(
             &[

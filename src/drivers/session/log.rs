@@ -297,9 +297,9 @@ impl SessionLog {
         let shown = path.display().to_string();
         let bytes = ratelab_core::input::read_regular_file(path, MAX_SESSION_BYTES)
             .map_err(|e| ReplayError::Read(e.to_string()))?;
-        let text = String::from_utf8(bytes).map_err(|_| ReplayError::Parse {
+        let text = ratelab_core::input::utf8_text(bytes).map_err(|e| ReplayError::Parse {
             path: shown.clone(),
-            detail: "not UTF-8 text".into(),
+            detail: e.to_string(),
         })?;
         let mut log: SessionLog = serde_json::from_str(&text).map_err(|e| ReplayError::Parse {
             path: shown.clone(),

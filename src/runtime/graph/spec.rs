@@ -282,7 +282,7 @@ pub struct GraphSpec {
 }
 
 /// A graph file that cannot be used: one line `FILE:LINE:COL: reason`, or `FILE: reason`
-/// for what concerns the whole file (it cannot be read, it is not UTF-8).
+/// for what concerns the whole file (it cannot be read).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub struct SpecError {
     /// The file (or what stands for it, e.g. a session log's run).
@@ -293,6 +293,17 @@ pub struct SpecError {
     pub col: usize,
     /// What is wrong.
     pub reason: String,
+}
+
+/// A graph file `origin` that is not UTF-8 text, at its first byte that is not
+/// (`FILE:LINE:COL: not UTF-8 text (byte 0xff)`).
+pub fn not_utf8(origin: &str, e: ratelab_core::input::NotUtf8) -> SpecError {
+    SpecError {
+        origin: origin.to_string(),
+        line: e.line,
+        col: e.col,
+        reason: format!("not UTF-8 text (byte {:#04x})", e.byte),
+    }
 }
 
 /// A [`SpecError`]'s reason when the file is not there.
@@ -500,8 +511,8 @@ impl GraphSpec {
     /// [`MAX_FILE_BYTES`], then parsed as [`GraphSpec::parse`].
     ///
     /// # Errors
-    /// A [`SpecError`] (line 0, the whole file, for a file that cannot be read or is not
-    /// UTF-8).
+    /// A [`SpecError`] (line 0, the whole file, for a file that cannot be read; at its first
+    /// byte that is not, for a file that is not UTF-8).
     pub fn load(path: &Path) -> Result<GraphSpec, SpecError> {
         let origin = path.display().to_string();
         let at_start = |reason: String| SpecError {
@@ -525,7 +536,7 @@ impl GraphSpec {
                 text.to_string()
             })
         })?;
-        let text = String::from_utf8(bytes).map_err(|_| at_start("not UTF-8 text".into()))?;
+        let text = ratelab_core::input::utf8_text(bytes).map_err(|e| not_utf8(&origin, e))?;
         GraphSpec::parse(&text, &origin)
     }
 
