@@ -1316,7 +1316,7 @@ fn process_and_router_say_a_broken_graph_file_as_every_command_does() {
         (broken, format!("{broken}:2:8: error: ")),
         (
             binary,
-            format!("error: {binary}:1:9: not UTF-8 text (byte 0xff)"),
+            format!("{binary}:1:9: error: not UTF-8 text (byte 0xff)"),
         ),
     ] {
         let process = ratelab(
