@@ -357,7 +357,7 @@ pub fn main_with(register: impl FnOnce()) -> ExitCode {
 
 /// A graph file's error as the command line prints it: `FILE:LINE:COL: error: reason`, as
 /// gcc and clang print theirs, or `error: FILE: reason` for what concerns the whole file
-/// (not found, not UTF-8, too large). One line: [`SpecError`](ratelab::graph::spec::SpecError)'s
+/// (not found, too large; a file that is not UTF-8 is placed at its first byte that is not). One line: [`SpecError`](ratelab::graph::spec::SpecError)'s
 /// parts have their control characters written out.
 fn spec_error_line(spec: &ratelab::graph::spec::SpecError) -> String {
     let origin = printable(&spec.origin);
@@ -388,7 +388,7 @@ fn handle_signals() {
                 let _ = crossterm::terminal::disable_raw_mode();
                 if say {
                     eprintln!(
-                        "ratelab: interrupted again: exiting at once, without a summary or files (a recording keeps what it had written)"
+                        "ratelab: interrupted again: exiting at once, without a summary or files (a new recording keeps what it had written)"
                     );
                 }
                 std::process::exit(i32::from(EXIT_INTERRUPTED));

@@ -131,7 +131,7 @@ pub fn read_regular_file(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputEr
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 #[error("not UTF-8 text (byte {byte:#04x} at line {line}, column {col})")]
 pub struct NotUtf8 {
-    /// The first byte that is not UTF-8 (of a sequence cut short: the last byte there is).
+    /// The first byte that is not UTF-8 (of a sequence cut short or broken: its first).
     pub byte: u8,
     /// Its line, from 1.
     pub line: usize,

@@ -44,7 +44,7 @@ pub enum OutputError {
     },
     /// A file written in place ([`PendingFile::create_in_place`]) was replaced at its name
     /// (moved over, or removed) while it was written: what was written is not there.
-    #[error("{0}: replaced or removed by something else while it was written; what was written there is lost")]
+    #[error("{0}: moved, replaced or removed by something else while it was written: the recording is not at that name")]
     Replaced(PathBuf),
     /// An I/O error while creating, writing or moving the file.
     #[error("cannot write {path}: {detail}")]
@@ -235,15 +235,20 @@ impl PendingFile {
     }
 
     /// Written in place: whether the final name still holds this file (the same device and
-    /// inode, not through a link).
-    fn still_ours(&self) -> bool {
+    /// inode, not through a link); `Ok(false)` when nothing is there.
+    ///
+    /// # Errors
+    /// The OS's, when what is at the name cannot be looked at (a folder made unreadable).
+    fn still_ours(&self) -> std::io::Result<bool> {
         use std::os::unix::fs::MetadataExt as _;
         let Some(f) = &self.in_place else {
-            return false;
+            return Ok(false);
         };
-        match (f.metadata(), std::fs::symlink_metadata(&self.dest)) {
-            (Ok(ours), Ok(there)) => ours.dev() == there.dev() && ours.ino() == there.ino(),
-            _ => false,
+        let ours = f.metadata()?;
+        match std::fs::symlink_metadata(&self.dest) {
+            Ok(there) => Ok(ours.dev() == there.dev() && ours.ino() == there.ino()),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(false),
+            Err(e) => Err(e),
         }
     }
 
@@ -271,10 +276,10 @@ impl PendingFile {
         }
         self.done = true;
         if self.in_place.is_some() {
-            return if self.still_ours() {
-                Ok(())
-            } else {
-                Err(OutputError::Replaced(self.dest.clone()))
+            return match self.still_ours() {
+                Ok(true) => Ok(()),
+                Ok(false) => Err(OutputError::Replaced(self.dest.clone())),
+                Err(e) => Err(OutputError::io(&self.dest, &e)),
             };
         }
         let result = self.move_into_place();
@@ -327,7 +332,7 @@ impl Drop for PendingFile {
     fn drop(&mut self) {
         // Written in place: removed only while the name still holds this file, never
         // whatever was put there since.
-        if !self.done && (self.in_place.is_none() || self.still_ours()) {
+        if !self.done && (self.in_place.is_none() || self.still_ours().unwrap_or(false)) {
             let _ = std::fs::remove_file(&self.tmp);
         }
     }

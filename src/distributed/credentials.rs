@@ -369,8 +369,8 @@ impl Credentials {
                 )));
             }
         }
-        let text = String::from_utf8(bytes)
-            .map_err(|_| DistError::Usage(format!("--credentials {shown}: not UTF-8 text")))?;
+        let text = ratelab_core::input::utf8_text(bytes)
+            .map_err(|e| DistError::Usage(format!("--credentials {shown}: {e}")))?;
         let c = Credentials::parse(&text, &format!("--credentials {shown}"))?;
         let now = unix_now_s();
         if now > c.valid_until_unix_s {

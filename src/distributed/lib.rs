@@ -525,7 +525,8 @@ pub fn live_tokens(
 /// `ratelab router` are given (`origin` names it in errors).
 ///
 /// # Errors
-/// [`DistError::Usage`], one line: not UTF-8, or not a graph file.
+/// [`DistError::Graph`], one line: not UTF-8 (placed at the first byte that is not), or
+/// not a graph file.
 pub(crate) fn graph_file(bytes: &[u8], origin: &str) -> Result<GraphSpec, DistError> {
     let text = ratelab_core::input::utf8_str(bytes)
         .map_err(|e| DistError::Graph(ratelab_runtime::graph::spec::not_utf8(origin, e)))?;

@@ -124,6 +124,10 @@ fn to_py(e: &anyhow::Error) -> PyErr {
                 // that filled, rerun failing to write: the system's, not a setting.
                 RecordingError::Unwritable { kind, .. } => os_error(kind, text),
                 RecordingError::Rerun { .. } => PyOSError::new_err(text),
+                // Its file moved or removed under it while the run went: the system's too.
+                RecordingError::Output(ratelab::output::OutputError::Replaced(_)) => {
+                    PyOSError::new_err(text)
+                }
                 _ => PyValueError::new_err(text),
             };
         }

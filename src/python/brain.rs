@@ -167,13 +167,12 @@ fn read_script_file(script: &str) -> Result<String, PythonError> {
                     missing: matches!(e, ratelab_core::input::InputError::NotFound(_)),
                 }
             })?;
-    String::from_utf8(bytes).map_err(|e| {
-        let upto = &e.as_bytes()[..e.utf8_error().valid_up_to()];
-        let line = upto.iter().filter(|b| **b == b'\n').count() + 1;
-        PythonError::Input {
-            line: format!("{script}:{line}: not UTF-8 text"),
-            missing: false,
-        }
+    ratelab_core::input::utf8_text(bytes).map_err(|e| PythonError::Input {
+        line: format!(
+            "{script}:{}: not UTF-8 text (byte {:#04x} at column {})",
+            e.line, e.byte, e.col
+        ),
+        missing: false,
     })
 }
 

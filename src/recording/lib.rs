@@ -343,7 +343,8 @@ fn time_point(timeline: &'static str, t: Nanos, step: u64) -> TimePoint {
 /// Why a recording cannot be written. One line each, naming the file.
 #[derive(Debug, thiserror::Error)]
 pub enum RecordingError {
-    /// A symbolic link or a non-regular file at the path, or a move into place that failed.
+    /// A symbolic link or a non-regular file at the path, a move into place that failed, or
+    /// a file written in place found replaced or removed at its name at the end.
     #[error("--record {0}")]
     Output(ratelab_core::output::OutputError),
     /// The path is a folder.
@@ -494,6 +495,9 @@ pub struct RecordOptions {
 pub struct Recording {
     rec: RecordingStream,
     path: PathBuf,
+    /// The path rerun was given to write ([`ratelab_core::output::PendingFile::write_path`]:
+    /// `/proc/self/fd/N` for a file written in place), said as `path` in its errors.
+    written_at: PathBuf,
     clock: ClockKind,
     /// The settings the run started with (for the blueprint's scales and ids).
     cfg: RunConfig,
@@ -691,6 +695,7 @@ impl Recording {
         let recording = Self {
             rec,
             path: path.to_path_buf(),
+            written_at: tmp.clone(),
             clock: cfg.clock,
             cfg: cfg.clone(),
             buffer: Arc::new(Mutex::new(ChunkBuffer::new(timeline_name(cfg.clock)))),
@@ -1214,6 +1219,11 @@ impl Recording {
                 .parent()
                 .and_then(writing_beside_fails)
                 .map_or_else(String::new, |e| format!(" ({e})"));
+            // rerun names the path it was given: the user's, not a descriptor's.
+            let e = (e.to_string()).replace(
+                &self.written_at.display().to_string(),
+                &self.path.display().to_string(),
+            );
             RecordingError::Rerun {
                 path: self.path.clone(),
                 detail: format!(
@@ -1257,6 +1267,12 @@ mod tests {
         assert_eq!(
             said,
             "record: r.rrd: is a symbolic link; refusing to write through it"
+        );
+        // A file written in place, moved or removed under the run: said at its end.
+        speaks(
+            &RecordingError::from(OutputError::Replaced(p())),
+            "--record r.rrd: moved, replaced or removed by something else while it was written: the recording is not at that name",
+            "record: r.rrd: moved, replaced or removed by something else while it was written: the recording is not at that name",
         );
         // A full disk: the file named, in each front end's words, its kind kept.
         let full = RecordingError::from(OutputError::Io {
