@@ -357,8 +357,9 @@ pub fn main_with(register: impl FnOnce()) -> ExitCode {
 
 /// A graph file's error as the command line prints it: `FILE:LINE:COL: error: reason`, as
 /// gcc and clang print theirs, or `error: FILE: reason` for what concerns the whole file
-/// (not found, too large; a file that is not UTF-8 is placed at its first byte that is not). One line: [`SpecError`](ratelab::graph::spec::SpecError)'s
-/// parts have their control characters written out.
+/// (not found, too large; a file that is not UTF-8 is placed at its first byte that is
+/// not). One line: [`SpecError`](ratelab::graph::spec::SpecError)'s parts have their
+/// control characters written out.
 fn spec_error_line(spec: &ratelab::graph::spec::SpecError) -> String {
     let origin = printable(&spec.origin);
     let reason = printable(&spec.reason);

@@ -409,8 +409,8 @@ fn warn(w: &str) {
 /// `--headless` was given before `ros2`.
 ///
 /// # Errors
-/// One line: `--headless` given, a bad domain or wait, no router; what ros2cli refuses with exit 1 as
-/// [`Refused`] (an unknown node or topic, a parameter not set, a topic of two types to
+/// One line: `--headless` given, a bad domain or wait, no router; what ros2cli refuses
+/// with exit 1 as [`Refused`] (an unknown node or topic, a parameter not set, a topic of two types to
 /// `echo`, `hz` or `bw`, a topic no node has to `echo`); `echo`, `hz` or `bw` stopped by
 /// Ctrl-C as [`Interrupted`], with ros2cli's exit code.
 pub fn run(args: &Ros2Args, headless: bool, stop: StopFlag) -> Result<()> {

@@ -181,9 +181,6 @@ impl PendingFile {
     /// is taken between the two without `force`).
     pub fn create_in_place(dest: &Path, force: bool) -> Result<(Self, std::fs::File), OutputError> {
         check_target(dest, force)?;
-        if std::fs::symlink_metadata(dest).is_ok() {
-            return Self::create(dest, force); // replacing a file: beside, then moved
-        }
         let (_, dir) = name_and_folder(dest)?;
         std::fs::create_dir_all(&dir).map_err(|e| OutputError::io(dest, &e))?;
         // create_new: never through a link or FIFO, nor over a file, put there since the check.
@@ -194,7 +191,9 @@ impl PendingFile {
         {
             Ok(f) => f,
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && force => {
-                return Self::create(dest, force); // a file there now: replaced, as above
+                // A file there (found by the check, or put there since): replaced, written
+                // beside and moved into place.
+                return Self::create(dest, force);
             }
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
                 return Err(OutputError::Exists(dest.to_path_buf()));
