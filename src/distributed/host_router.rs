@@ -25,6 +25,7 @@
 //! as without a router.
 
 use super::credentials::{Credentials, Role};
+use super::liveliness::TokenWatch;
 use super::{check_endpoint, open_as, Access, DistError, Keys, Mode};
 use ratelab_runtime::graph::spec::GraphSpec;
 use ratelab_runtime::scheduler::StopFlag;
@@ -119,16 +120,20 @@ pub fn serve(opts: &HostRouterOptions, stop: &StopFlag) -> Result<Served, DistEr
     };
     let session = open_as((Mode::Router, false), &opts.listen, &opts.connect, access)?;
     let keys = Keys::new(&spec.name);
-    let (present, gone) = (StopFlag::new(), StopFlag::new());
+    // Seen once, then gone once withdrawn for good (Zenoh may withdraw it for a moment as
+    // routes change: [`crate::liveliness`]).
+    let (present, gone) = (StopFlag::new(), TokenWatch::new());
     let _launcher_watch = {
         let (present, gone) = (present.clone(), gone.clone());
         session
             .liveliness()
             .declare_subscriber(keys.launcher_token())
             .history(true)
-            .callback(move |s| match s.kind() {
-                zenoh::sample::SampleKind::Put => present.stop(),
-                zenoh::sample::SampleKind::Delete => gone.stop(),
+            .callback(move |s| {
+                if s.kind() == zenoh::sample::SampleKind::Put {
+                    present.stop();
+                }
+                gone.note(s.kind());
             })
             .wait()?
     };
@@ -160,7 +165,7 @@ pub fn serve(opts: &HostRouterOptions, stop: &StopFlag) -> Result<Served, DistEr
         opts.listen.join(", ")
     ));
     loop {
-        if gone.is_stopped() {
+        if gone.is_gone() {
             say("the launch ended (or its host can no longer be reached): routing no more".into());
             return Ok(Served::LaunchEnded);
         }

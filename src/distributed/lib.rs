@@ -28,7 +28,9 @@
 //!   publisher's sequence numbers count as `lost` on the wire.
 //! - **Discovery and liveliness** are Zenoh liveliness tokens, one per node and one per
 //!   publisher and subscriber carrying its QoS in short (rmw_zenoh encodes its graph the same
-//!   way, `docs/design.md`): `ratelab top` lists them, and the launcher sees a process go.
+//!   way, `docs/design.md`): `ratelab top` lists them, and the launcher sees a process go
+//!   once its token has stayed withdrawn for a moment ([`liveliness`]: Zenoh may withdraw a
+//!   live token briefly as routes change).
 //! - **Time.** Under the real clock the processes share the host's monotonic clock and one
 //!   run-time zero, so stamps and sense→act latency stay exact on one host. Under the
 //!   virtual clock every process replays the one [`ratelab_runtime::scheduler::VirtualScheduler`]
@@ -51,6 +53,7 @@ pub mod access;
 pub mod credentials;
 pub mod host_router;
 pub mod launcher;
+pub mod liveliness;
 pub mod lockstep;
 pub mod monitor;
 pub mod process;

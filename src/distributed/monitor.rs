@@ -25,6 +25,7 @@
 //! (`launch --processes --record`).
 
 use super::credentials::{Credentials, Role};
+use super::liveliness::TokenWatch;
 use super::process::LiveStats;
 use super::wire::{self, RunOver, Setup};
 use super::{check_endpoint, open_client, Access, DistError, Keys};
@@ -550,7 +551,8 @@ fn continued(before: &TopicStats, now: &TopicStats) -> TopicStats {
 enum Event {
     Stats(Box<LiveStats>),
     Alive(String, String, bool),
-    Launcher(bool),
+    /// The launcher's token declared (its withdrawal is read from a [`TokenWatch`]).
+    Launcher,
     Log(String),
     Over(Box<RunOver>),
 }
@@ -632,6 +634,7 @@ impl Watch {
     fn listen(
         &self,
         ev_tx: Sender<Event>,
+        launcher_token: &TokenWatch,
     ) -> Result<Vec<zenoh::pubsub::Subscriber<()>>, DistError> {
         let keys = &self.keys;
         // A full queue drops the event (the fold is behind; Zenoh's threads never wait).
@@ -668,16 +671,17 @@ impl Watch {
             })
             .wait()?;
         let t = ev_tx.clone();
+        let token = launcher_token.clone();
         let launcher = self
             .session
             .liveliness()
             .declare_subscriber(keys.launcher_token())
             .history(true)
             .callback(move |s| {
-                send(
-                    &t,
-                    Event::Launcher(s.kind() == zenoh::sample::SampleKind::Put),
-                );
+                token.note(s.kind());
+                if s.kind() == zenoh::sample::SampleKind::Put {
+                    send(&t, Event::Launcher);
+                }
             })
             .wait()?;
         let t = ev_tx.clone();
@@ -725,7 +729,9 @@ impl Watch {
         signals: Signals,
     ) -> Result<(), DistError> {
         let (ev_tx, ev_rx) = crossbeam_channel::bounded::<Event>(EVENTS);
-        let _subscribers = self.listen(ev_tx)?;
+        // The launcher's token, gone once withdrawn for good ([`crate::liveliness`]).
+        let launcher_token = TokenWatch::new();
+        let _subscribers = self.listen(ev_tx, &launcher_token)?;
         let mut fold = Fold::new(&self.cfg, &self.setup.policy);
         let started = Telemetry::Started {
             cfg: self.cfg.clone(),
@@ -782,13 +788,7 @@ impl Watch {
                     out.push(fold.status());
                     last_status = Instant::now();
                 }
-                Ok(Event::Launcher(true)) => launcher_seen = true,
-                Ok(Event::Launcher(false)) if !fold.is_over() && launcher_seen => {
-                    out.push(Telemetry::Error(
-                        "the launcher is gone: the run is over (no summary was received)".into(),
-                    ));
-                    launcher_seen = false;
-                }
+                Ok(Event::Launcher) => launcher_seen = true,
                 Ok(Event::Log(line)) => match process_line(&line, &names, &node_names) {
                     // What a process's nodes wrote: to the lab's log pane, stamped as in
                     // one process.
@@ -802,6 +802,12 @@ impl Watch {
                     out = fold.ended(*over);
                 }
                 Ok(_) | Err(_) => {}
+            }
+            if launcher_seen && !fold.is_over() && launcher_token.is_gone() {
+                out.push(Telemetry::Error(
+                    "the launcher is gone: the run is over (no summary was received)".into(),
+                ));
+                launcher_seen = false;
             }
             // Holders late with their last figures (or dead at the end) are given a while.
             if over_at.is_some_and(|t| t.elapsed() >= OVER_GRACE) {

@@ -19,6 +19,7 @@
 //! threads), `stats` (the live figures it publishes, [`LiveStats`]).
 
 use super::credentials::{Credentials, Role};
+use super::liveliness::TokenWatch;
 use super::lockstep;
 use super::wire::{self, ToLauncher, ToProcess};
 use super::{check_endpoint, open_client, Access, DistError, Keys, REPLY_TIMEOUT};
@@ -257,7 +258,7 @@ pub fn run_process(opts: &ProcessOptions, stop: &StopFlag) -> Result<(), DistErr
     let state = result?;
     // The launcher vanished mid-run (killed): nobody will take the report or print a
     // summary; say so rather than end as if the run had completed.
-    if launcher_gone.is_stopped() && !stop.is_stopped() {
+    if launcher_gone.is_gone() && !stop.is_stopped() {
         return Err(DistError::Peer(
             "the launcher went away mid-run: this process stopped with it (no summary)".into(),
         ));
@@ -284,11 +285,11 @@ pub const REPORT_TAKEN_WAIT: Duration = Duration::from_secs(2);
 fn await_report_taken(
     ctl: &Receiver<ToProcess>,
     stop: &StopFlag,
-    launcher_gone: &StopFlag,
+    launcher_gone: &TokenWatch,
     wait: Duration,
 ) {
     let deadline = Instant::now() + wait;
-    while !stop.is_stopped() && !launcher_gone.is_stopped() {
+    while !stop.is_stopped() && !launcher_gone.is_gone() {
         let left = deadline.saturating_duration_since(Instant::now());
         if left.is_zero() {
             return;
@@ -470,7 +471,7 @@ fn run_share(
     core: RunCore,
     share: &Arc<Share>,
     (slot, nudged): (Option<&stepper::SharedSlot>, &Receiver<()>),
-    (ctl_rx, stop, launcher_gone): (&Receiver<ToProcess>, &StopFlag, &StopFlag),
+    (ctl_rx, stop, launcher_gone): (&Receiver<ToProcess>, &StopFlag, &TokenWatch),
     reporting: stepper::Reporting,
     (say, send): (&dyn Fn(String), SendUp<'_>),
 ) -> Result<GraphState, DistError> {
@@ -616,11 +617,11 @@ mod tests {
     /// once on Ctrl-C or when the launcher is gone.
     #[test]
     fn a_process_waits_for_the_receipt_of_its_report() {
-        use super::{await_report_taken, ToProcess};
+        use super::{await_report_taken, ToProcess, TokenWatch};
         use ratelab_runtime::scheduler::StopFlag;
         use std::time::{Duration, Instant};
         let (tx, rx) = crossbeam_channel::unbounded();
-        let (stop, gone) = (StopFlag::new(), StopFlag::new());
+        let (stop, gone) = (StopFlag::new(), TokenWatch::new());
         let long = Duration::from_secs(60);
         // The receipt after a late stop and horizon: taken, the wait ends there.
         tx.send(ToProcess::Stop {
@@ -643,12 +644,12 @@ mod tests {
         let began = Instant::now();
         await_report_taken(&rx, &stop, &gone, Duration::from_millis(200));
         assert!(began.elapsed() >= Duration::from_millis(200));
-        // The launcher gone, or Ctrl-C: at once.
-        gone.stop();
+        // The launcher gone (its token withdrawn at boot: long settled), or Ctrl-C: at once.
+        gone.note_at(zenoh::sample::SampleKind::Delete, 1);
         let began = Instant::now();
         await_report_taken(&rx, &stop, &gone, long);
         assert!(began.elapsed() < Duration::from_secs(30));
-        let gone = StopFlag::new();
+        let gone = TokenWatch::new();
         stop.stop();
         let began = Instant::now();
         await_report_taken(&rx, &stop, &gone, long);

@@ -29,6 +29,7 @@ mod relay;
 mod virtual_run;
 
 use super::credentials::{Credentials, PrivateDir, Role};
+use super::liveliness::Withdrawals;
 use super::monitor::Carried;
 use super::wire::{self, Setup, ToLauncher, ToProcess};
 use super::{check_endpoint, check_keys, Access, DistError, Keys};
@@ -541,7 +542,7 @@ pub fn launch(
     if let Some(tx) = &opts.listening {
         let _ = tx.send(endpoint.clone());
     }
-    let (_live_sub, gone_rx, gone_now) = watch_gone(&session, &keys)?;
+    let (_live_sub, gone) = watch_gone(&session, &keys)?;
     // The crossing topics' samples, passed on by each process's outbox ([`outbox`]; dropped
     // when it is full under the real clock only); under the virtual clock every process's
     // tick reports too, to follow the run and hand each process the others' in its turn
@@ -579,12 +580,12 @@ pub fn launch(
     let (end, lockstep, taken_at) = match &relaying {
         Some(relaying) => {
             let gathered = (&mut reports, &mut wires, &mut carried);
-            let (end, lockstep) = me.run_lockstep(relaying, &gone_now, start, gathered)?;
+            let (end, lockstep) = me.run_lockstep(relaying, &gone, start, gathered)?;
             (end, lockstep, BTreeMap::new())
         }
         None => {
             let (end, taken_at) = me.supervise(
-                &gone_rx,
+                &gone,
                 &mut children,
                 &mut carried,
                 &mut reports,
@@ -674,41 +675,71 @@ fn hear_processes(
     Ok((sub, up_rx))
 }
 
-/// Processes going away (their node tokens withdrawn): each name as it goes, and the list
-/// of those gone so far. Keep the subscriber.
-#[allow(clippy::type_complexity)]
+/// Processes going away: a process is gone once one of its node tokens
+/// (`@node/<process>/<node>`) has stayed withdrawn for [`crate::liveliness::WITHDRAWN_FOR`]
+/// (Zenoh may withdraw a live token for a moment as routes change: [`crate::liveliness`]).
+/// The subscriber's callback notes; the run's loop asks, and what has settled is said then.
+pub(super) struct GoneProcesses {
+    withdrawals: Withdrawals,
+    /// `<prefix>/@node/`, before a token's process.
+    token_prefix: String,
+    /// Every process gone so far, in the order they went (a process restarted and gone
+    /// again is in it twice), and how many of them [`GoneProcesses::next`] has handed out.
+    gone: Mutex<(Vec<String>, usize)>,
+}
+
+impl GoneProcesses {
+    fn new(keys: &Keys) -> Self {
+        Self {
+            withdrawals: Withdrawals::new(),
+            token_prefix: format!("{}/@node/", keys.prefix()),
+            gone: Mutex::default(),
+        }
+    }
+
+    /// Move the settled withdrawals into the list of the gone: the process a token names.
+    fn settle(&self) -> std::sync::MutexGuard<'_, (Vec<String>, usize)> {
+        let mut gone = ratelab_runtime::graph::lock(&self.gone);
+        for key in self.withdrawals.take_settled() {
+            if let Some(p) = key
+                .strip_prefix(&self.token_prefix)
+                .and_then(|r| r.split('/').next())
+            {
+                gone.0.push(p.to_string());
+            }
+        }
+        gone
+    }
+
+    /// Every process gone so far (under the virtual clock: any of them ends the run).
+    pub(super) fn all(&self) -> Vec<String> {
+        self.settle().0.clone()
+    }
+
+    /// The next process gone since the last call, each withdrawal once (under the real
+    /// clock, where a process may be started again and go again).
+    pub(super) fn next(&self) -> Option<String> {
+        let mut gone = self.settle();
+        let (list, taken) = &mut *gone;
+        let p = list.get(*taken).cloned();
+        *taken += usize::from(p.is_some());
+        p
+    }
+}
+
+/// Watch the processes' node tokens for [`GoneProcesses`]. Keep the subscriber.
 fn watch_gone(
     session: &zenoh::Session,
     keys: &Keys,
-) -> Result<
-    (
-        zenoh::pubsub::Subscriber<()>,
-        Receiver<String>,
-        Arc<Mutex<Vec<String>>>,
-    ),
-    DistError,
-> {
-    let (gone_tx, gone_rx) = crossbeam_channel::unbounded::<String>();
-    let gone_now: Arc<Mutex<Vec<String>>> = Arc::default();
-    let gone_cb = gone_now.clone();
-    let token_prefix = format!("{}/@node/", keys.prefix());
+) -> Result<(zenoh::pubsub::Subscriber<()>, Arc<GoneProcesses>), DistError> {
+    let gone = Arc::new(GoneProcesses::new(keys));
+    let noted = gone.clone();
     let sub = session
         .liveliness()
         .declare_subscriber(format!("{}/@node/**", keys.prefix()))
-        .callback(move |s| {
-            if s.kind() == zenoh::sample::SampleKind::Delete {
-                let k = s.key_expr().as_str();
-                if let Some(p) = k
-                    .strip_prefix(&token_prefix)
-                    .and_then(|r| r.split('/').next())
-                {
-                    ratelab_runtime::graph::lock(&gone_cb).push(p.to_string());
-                    let _ = gone_tx.send(p.to_string());
-                }
-            }
-        })
+        .callback(move |s| noted.withdrawals.note(s.key_expr().as_str(), s.kind()))
         .wait()?;
-    Ok((sub, gone_rx, gone_now))
+    Ok((sub, gone))
 }
 
 /// Open the launcher's session, the router of the launch (linked directly or not,

@@ -7,7 +7,7 @@
 
 use super::admission::Admission;
 use super::processes::Children;
-use super::Launch;
+use super::{GoneProcesses, Launch};
 use crate::monitor::{Carried, Silence};
 use crate::process::LiveStats;
 use crate::wire::{self, ToLauncher, ToProcess};
@@ -22,8 +22,8 @@ use std::time::{Duration, Instant};
 use zenoh::Wait;
 
 impl Launch<'_> {
-    /// Run the graph under the real clock to its end: `gone_rx` says each process whose
-    /// liveliness token went; `children` are the processes the launch started (started
+    /// Run the graph under the real clock to its end: `gone` says each process whose
+    /// liveliness token went for good; `children` are the processes the launch started (started
     /// again in place on failure); `carried` keeps what a process started again had
     /// counted before. Every process's report lands in `reports` and `wires`; the processes
     /// killed on request ([`super::LaunchOptions::kill_processes`]) in `killed`, with the run
@@ -36,7 +36,7 @@ impl Launch<'_> {
     /// [`DistError`] when the start cannot be sent or the figures cannot be subscribed to.
     pub(super) fn supervise(
         &self,
-        gone_rx: &Receiver<String>,
+        gone: &GoneProcesses,
         children: &mut Children,
         carried: &mut Carried,
         reports: &mut BTreeMap<String, GraphState>,
@@ -83,7 +83,7 @@ impl Launch<'_> {
             run.hear_figures(self, &stats_rx, carried);
             run.kill_due(self, children, &mut kills);
             run.restart_failed(self, children);
-            run.note_gone(self, gone_rx);
+            run.note_gone(self, gone);
             run.stop_once_ended(self);
             self.say_refusals_due();
             run.say_waiting(self, reports);
@@ -338,8 +338,8 @@ impl Supervision {
     }
 
     /// Processes whose liveliness token went: said, and the plant's ends the run.
-    fn note_gone(&mut self, l: &Launch, gone_rx: &Receiver<String>) {
-        while let Ok(p) = gone_rx.try_recv() {
+    fn note_gone(&mut self, l: &Launch, gone: &GoneProcesses) {
+        while let Some(p) = gone.next() {
             // A process that said it ended goes once its report is taken: not news.
             if !l.names.contains(&p) || self.ended.contains(&p) || self.gone.contains(&p) {
                 continue;

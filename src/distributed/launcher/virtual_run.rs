@@ -6,7 +6,7 @@
 
 use super::admission::Admission;
 use super::relay::{failed, Relay, Relaying};
-use super::{Launch, Link, LockstepCost};
+use super::{GoneProcesses, Launch, Link, LockstepCost};
 use crate::monitor::Carried;
 use crate::process::LiveStats;
 use crate::wire::{self, ToLauncher, ToProcess};
@@ -42,7 +42,7 @@ impl Launch<'_> {
     pub(super) fn run_lockstep(
         &self,
         relaying: &Relaying,
-        gone_now: &Mutex<Vec<String>>,
+        gone_now: &GoneProcesses,
         start: Instant,
         (reports, wires, carried): Gathered<'_>,
     ) -> Result<(RunEnd, Option<LockstepCost>), DistError> {
@@ -79,7 +79,7 @@ impl Launch<'_> {
         // Every message sent is delivered before the reports: the last ones too, but those
         // of a process that is gone, which may have died with them still to send (its
         // report reached us, its sample not the subscriber).
-        let gone = ratelab_runtime::graph::lock(gone_now).clone();
+        let gone = gone_now.all();
         let need: Vec<(usize, u64)> = (tally.published.iter().enumerate())
             .filter_map(|(t, s)| s.map(|s| (t, s)))
             .filter(|&(t, _)| !gone.contains(&spec.process_of(spec.topics[t].publisher)))
@@ -129,7 +129,7 @@ impl Launch<'_> {
         &self,
         relay: &Relay,
         nudged: &Receiver<()>,
-        gone_now: &Mutex<Vec<String>>,
+        gone_now: &GoneProcesses,
         lookahead: u64,
     ) -> Result<RunEnd, DistError> {
         let (spec, cfg, stop, link) = (self.spec, self.cfg, self.stop, &self.link);
@@ -188,10 +188,7 @@ impl Launch<'_> {
             // Any of the graph's processes, not only the next event's: a tick of another
             // process may be waiting for the gone one's message, and would only time out
             // (REPLY_TIMEOUT) before saying so.
-            let gone = ratelab_runtime::graph::lock(gone_now)
-                .iter()
-                .find(|p| self.names.contains(p))
-                .cloned();
+            let gone = gone_now.all().into_iter().find(|p| self.names.contains(p));
             // Linked directly, the launcher hears the others' reports in batches: it ends
             // the run once they stop coming, where the furthest process got.
             let settled = !relay.follows_in_batches()
@@ -272,7 +269,7 @@ const GONE_REPORT_GRACE: Duration = Duration::from_secs(2);
 fn collect_reports(
     (link, stop): (&Link, &StopFlag),
     names: &[String],
-    gone: &Mutex<Vec<String>>,
+    gone: &GoneProcesses,
     end: &RunEnd,
     need: Vec<(usize, u64)>,
     reports: &mut BTreeMap<String, GraphState>,
@@ -280,10 +277,8 @@ fn collect_reports(
 ) {
     // Gone before the stop: no report will come (a virtual-clock process reports once
     // told to stop).
-    let mut gone_since: BTreeMap<String, Option<Instant>> = ratelab_runtime::graph::lock(gone)
-        .iter()
-        .map(|p| (p.clone(), None))
-        .collect();
+    let mut gone_since: BTreeMap<String, Option<Instant>> =
+        gone.all().iter().map(|p| (p.clone(), None)).collect();
     for p in names {
         let _ = link.tell(
             p,
@@ -310,8 +305,8 @@ fn collect_reports(
         if stop.is_stopped() {
             deadline = deadline.min(now + interrupted);
         }
-        for p in ratelab_runtime::graph::lock(gone).iter() {
-            gone_since.entry(p.clone()).or_insert(Some(now));
+        for p in gone.all() {
+            gone_since.entry(p).or_insert(Some(now));
         }
         if !awaits_a_report(names, reports, &gone_since, now) || now >= deadline {
             break;

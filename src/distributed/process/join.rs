@@ -47,8 +47,9 @@ pub(super) struct Joined {
     pub(super) keys: Keys,
     /// The launcher's control messages to this process.
     pub(super) ctl_rx: Receiver<ToProcess>,
-    /// Set once the launcher's liveliness token is withdrawn.
-    pub(super) launcher_gone: StopFlag,
+    /// The launcher's liveliness token: gone once withdrawn for good
+    /// ([`crate::liveliness`]).
+    pub(super) launcher_gone: TokenWatch,
     /// Where this process speaks to the launcher (its own key).
     pub(super) up: zenoh::pubsub::Publisher<'static>,
     /// The run's settings.
@@ -92,19 +93,16 @@ impl Joined {
                 }
             })
             .wait()?;
-        // The launcher's token: withdrawn, the run is over for us too.
-        let launcher_gone = StopFlag::new();
+        // The launcher's token: withdrawn for good, the run is over for us too (Zenoh may
+        // withdraw it for a moment as this peer's links change: [`crate::liveliness`]).
+        let launcher_gone = TokenWatch::new();
         let _launcher_watch = {
             let gone = launcher_gone.clone();
             session
                 .liveliness()
                 .declare_subscriber(keys.launcher_token())
                 .history(true)
-                .callback(move |s| {
-                    if s.kind() == zenoh::sample::SampleKind::Delete {
-                        gone.stop();
-                    }
-                })
+                .callback(move |s| gone.note(s.kind()))
                 .wait()?
         };
         // Control messages and samples are never dropped under congestion (Zenoh's default
@@ -191,7 +189,7 @@ impl Joined {
 pub(super) fn recv(
     rx: &Receiver<ToProcess>,
     stop: &StopFlag,
-    gone: &StopFlag,
+    gone: &TokenWatch,
 ) -> Result<ToProcess, DistError> {
     loop {
         match rx.recv_timeout(Duration::from_millis(50)) {
@@ -199,7 +197,7 @@ pub(super) fn recv(
             Err(RecvTimeoutError::Disconnected) => {
                 return Err(DistError::Peer("the launcher's channel closed".into()))
             }
-            Err(RecvTimeoutError::Timeout) if gone.is_stopped() => {
+            Err(RecvTimeoutError::Timeout) if gone.is_gone() => {
                 return Err(DistError::Peer("the launcher went away".into()))
             }
             Err(RecvTimeoutError::Timeout) if stop.is_stopped() => {
@@ -217,7 +215,7 @@ pub(super) fn recv(
 pub(super) fn recv_own(
     rx: &Receiver<ToProcess>,
     stop: &StopFlag,
-    gone: &StopFlag,
+    gone: &TokenWatch,
 ) -> Result<ToProcess, DistError> {
     loop {
         match recv(rx, stop, gone)? {
@@ -232,7 +230,7 @@ pub(super) fn recv_own(
 pub(super) fn wait_matching(
     p: &zenoh::pubsub::Publisher<'_>,
     stop: &StopFlag,
-    (gone, patience): (Option<&StopFlag>, Duration),
+    (gone, patience): (Option<&TokenWatch>, Duration),
     who: &str,
 ) -> Result<(), DistError> {
     poll_until(
@@ -268,7 +266,7 @@ pub(super) fn wait_heard(
     keys: &Keys,
     (publishers, linked): (&super::bridge::Publishers, Option<&[String]>),
     stop: &StopFlag,
-    launcher_gone: &StopFlag,
+    launcher_gone: &TokenWatch,
 ) -> Result<(), DistError> {
     let while_there = (Some(launcher_gone), REPLY_TIMEOUT);
     if let Some(others) = linked {
@@ -302,7 +300,7 @@ pub(super) fn wait_subscribed(
     keys: &Keys,
     others: &[String],
     stop: &StopFlag,
-    (gone, patience): (Option<&StopFlag>, Duration),
+    (gone, patience): (Option<&TokenWatch>, Duration),
 ) -> Result<(), DistError> {
     let heard: Arc<Mutex<std::collections::BTreeSet<String>>> = Arc::default();
     let _watch = {
@@ -362,7 +360,7 @@ pub(super) fn wait_linked(
     session: &zenoh::Session,
     others: usize,
     stop: &StopFlag,
-    (gone, patience): (Option<&StopFlag>, Duration),
+    (gone, patience): (Option<&TokenWatch>, Duration),
 ) -> Result<(), DistError> {
     poll_until(
         stop,
@@ -397,7 +395,7 @@ pub(super) fn wait_linked(
 /// already met succeeds.
 fn poll_until<T>(
     stop: &StopFlag,
-    gone: Option<&StopFlag>,
+    gone: Option<&TokenWatch>,
     deadline: Option<Instant>,
     every: Duration,
     mut ready: impl FnMut() -> Result<(), T>,
@@ -411,7 +409,7 @@ fn poll_until<T>(
         if stop.is_stopped() {
             return Err(DistError::Peer("interrupted".into()));
         }
-        if gone.is_some_and(StopFlag::is_stopped) {
+        if gone.is_some_and(TokenWatch::is_gone) {
             return Err(DistError::Peer("the launcher went away".into()));
         }
         if deadline.is_some_and(|d| Instant::now() >= d) {
@@ -437,6 +435,7 @@ pub(super) fn launchers_seen(session: &zenoh::Session) -> Vec<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::liveliness::WITHDRAWN_FOR;
 
     const NOW: Duration = Duration::from_millis(1);
 
@@ -483,8 +482,10 @@ mod tests {
 
     #[test]
     fn a_wait_ends_on_a_stop_or_the_launcher_gone_but_not_once_met() {
-        let (stop, gone) = (StopFlag::new(), StopFlag::new());
-        gone.stop();
+        let (stop, gone) = (StopFlag::new(), TokenWatch::new());
+        // Withdrawn for good: longer ago than the grace.
+        let long_ago = wire::mono_now_ns().saturating_sub(2 * WITHDRAWN_FOR.as_nanos() as u64);
+        gone.note_at(zenoh::sample::SampleKind::Delete, long_ago);
         // A wait watching the launcher, without a deadline, until `ready` holds.
         let watching = |ready: Result<(), ()>| {
             poll_until(&stop, Some(&gone), None, NOW, || ready, |()| unreachable!())
@@ -497,9 +498,38 @@ mod tests {
         assert!(e.contains("interrupted"), "{e}");
     }
 
+    /// Zenoh withdrew the launcher's token for a moment as the processes linked to each
+    /// other (declared again 5 ms later): the wait goes on.
+    #[test]
+    fn a_wait_rides_out_the_launcher_s_token_withdrawn_for_a_moment() {
+        let (stop, gone) = (StopFlag::new(), TokenWatch::new());
+        gone.note(zenoh::sample::SampleKind::Delete);
+        let mut polls = 0;
+        poll_until(
+            &stop,
+            Some(&gone),
+            None,
+            NOW,
+            || {
+                polls += 1;
+                if polls == 3 {
+                    gone.note(zenoh::sample::SampleKind::Put);
+                }
+                if polls == 10 {
+                    Ok(())
+                } else {
+                    Err(())
+                }
+            },
+            |()| unreachable!(),
+        )
+        .unwrap();
+        assert!(!gone.is_gone_at(u64::MAX), "declared again: never gone");
+    }
+
     #[test]
     fn a_wait_without_a_deadline_goes_on_until_ready_while_the_launcher_lives() {
-        let (stop, gone) = (StopFlag::new(), StopFlag::new());
+        let (stop, gone) = (StopFlag::new(), TokenWatch::new());
         let started = Instant::now();
         let mut polls = 0;
         poll_until(

@@ -4,6 +4,7 @@
 
 use super::stats::{held_topics, read_counters};
 use super::{wire, DistError, GraphState, NodeId, Share, StopFlag, ToLauncher, ToProcess};
+use crate::liveliness::TokenWatch;
 use crossbeam_channel::{Receiver, RecvTimeoutError};
 use ratelab_core::metrics::NodeTiming;
 use ratelab_core::time::Nanos;
@@ -24,7 +25,7 @@ pub(super) fn real_clock(
     start: u64,
     ctl_rx: &Receiver<ToProcess>,
     stop: &StopFlag,
-    launcher_gone: &StopFlag,
+    launcher_gone: &TokenWatch,
     send: super::SendUp<'_>,
 ) -> Result<GraphState, DistError> {
     let cfg = &share.cfg;
@@ -152,7 +153,7 @@ struct Watch<'a> {
     /// The launcher's messages (`None` once its channel has closed).
     rx: Option<&'a Receiver<ToProcess>>,
     outer: &'a StopFlag,
-    gone: &'a StopFlag,
+    gone: &'a TokenWatch,
     /// The launcher's stop's run time, once it has come.
     launcher_at: Option<Nanos>,
     /// The watch stopped the run.
@@ -189,7 +190,7 @@ impl RealPolicy for Watch<'_> {
             Ok(_) => {}
             // Its stop cannot come now; a local stop or its going away still can.
             Err(RecvTimeoutError::Disconnected) => self.rx = None,
-            Err(RecvTimeoutError::Timeout) if self.outer.is_stopped() || self.gone.is_stopped() => {
+            Err(RecvTimeoutError::Timeout) if self.outer.is_stopped() || self.gone.is_gone() => {
                 self.left = true;
                 return Intake::Leave;
             }

@@ -18,6 +18,7 @@
 
 use super::stats::{held_topics, read_counters};
 use super::Share;
+use crate::liveliness::TokenWatch;
 use crate::lockstep::{self, check_tick_report, TickInbox};
 use crate::wire::ToProcess;
 use crate::wire::{self, Ticked};
@@ -768,7 +769,7 @@ pub(super) fn run_lockstep(
     ctl: &Receiver<ToProcess>,
     reporting: Reporting,
     stop: &StopFlag,
-    launcher_gone: &StopFlag,
+    launcher_gone: &TokenWatch,
 ) -> Result<GraphState, DistError> {
     let run = Stepper::new(core, share.clone(), reporting, stop.clone());
     *ratelab_runtime::graph::lock(&slot.run) = Some(run);
@@ -807,7 +808,7 @@ pub(super) fn run_lockstep(
             },
             recv(nudged) -> _ => slot.wake(true),
             default(Duration::from_millis(100)) => {
-                if launcher_gone.is_stopped() {
+                if launcher_gone.is_gone() {
                     return failed(DistError::Peer("the launcher went away".into()));
                 }
                 // An input that never came fails its tick after a while: look again.
@@ -859,7 +860,7 @@ pub(super) fn run_lockstep(
 fn take_the_rest(
     slot: &SharedSlot,
     nudged: &Receiver<()>,
-    (stop, launcher_gone): (&StopFlag, &StopFlag),
+    (stop, launcher_gone): (&StopFlag, &TokenWatch),
     deadline: Instant,
 ) -> Result<(), DistError> {
     loop {
@@ -876,7 +877,7 @@ fn take_the_rest(
         if stop.is_stopped() {
             return Err(DistError::Peer("interrupted".into()));
         }
-        if launcher_gone.is_stopped() {
+        if launcher_gone.is_gone() {
             return Err(DistError::Peer("the launcher went away".into()));
         }
         if Instant::now() >= deadline {
