@@ -378,7 +378,7 @@ fn a_day_of_virtual_run_time_takes_no_more_memory_than_ten_minutes() {
     let dir = tempfile::tempdir().unwrap();
     let run = |secs: &str| {
         let args = ["run", "--clock", "virtual", "--duration", secs];
-        let o = crate::hostile::run_child(&args, dir.path(), Duration::from_secs(600), |_| {});
+        let o = crate::hostile::measure_child(&args, dir.path(), Duration::from_secs(600));
         assert_eq!(o.code, Some(0), "a {secs} s run: {o:?}");
         o.peak_mib
     };
@@ -436,7 +436,7 @@ fn a_long_run_with_out_writes_its_trace_as_it_goes_in_flat_memory() {
             "--out",
             out.to_str().unwrap(),
         ];
-        let o = crate::hostile::run_child(&args, dir.path(), Duration::from_secs(600), |_| {});
+        let o = crate::hostile::measure_child(&args, dir.path(), Duration::from_secs(600));
         assert_eq!(o.code, Some(0), "a {secs} s run: {o:?}");
         (o.peak_mib, out)
     };

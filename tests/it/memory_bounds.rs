@@ -5,7 +5,7 @@
 //! more threads than `ratelab::limits::MAX_REAL_CLOCK_THREADS` before any starts: one line,
 //! exit 2, never a panic (exit 101) or an abort.
 
-use crate::hostile::run_child;
+use crate::hostile::{measure_child, run_child};
 use std::path::Path;
 use std::time::Duration;
 
@@ -47,7 +47,7 @@ fn camera_graph(w: u32, h: u32, camera_hz: f64, depth: usize, vision_hz: f64) ->
 /// exactly one line on stderr holding every needle, no panic. Returns the line and the peak
 /// memory, MiB.
 fn refused(args: &[&str], dir: &Path, timeout: Duration, needles: &[&str]) -> (String, f64) {
-    let o = run_child(args, dir, timeout, |_| {});
+    let o = measure_child(args, dir, timeout);
     println!(
         "{:>7.1} MiB {:>6} ms  {}",
         o.peak_mib,
