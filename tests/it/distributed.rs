@@ -156,6 +156,74 @@ fn virtual_lockstep_through_the_star_is_byte_identical_too() {
     assert_lockstep_equals_in_process(&[], &["graphs/cartpole.toml", "--star"]);
 }
 
+/// The launch's sleeps (voluntary context switches of the launcher and its processes, as
+/// the kernel counts them for a reaped child and the children it reaped) and the instants
+/// of a virtual-clock launch of the chapter's graph lasting `duration_s` seconds.
+// Reaped by wait4, which clippy does not see as a wait.
+#[allow(clippy::zombie_processes)]
+fn sleeps_and_instants(duration_s: &str, out: &Path) -> (i64, i64) {
+    let mut child = bin()
+        .args(["launch", "--processes", "--clock", "virtual", "--headless"])
+        .args(["--duration", duration_s, "--out"])
+        .arg(out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Both pipes read to their end (the launch and its processes have exited, or closed
+    // them), then the child reaped by wait4 for its resource usage, not by `Child::wait`.
+    let mut stderr = child.stderr.take().unwrap();
+    let err = std::thread::spawn(move || {
+        let mut err = String::new();
+        std::io::Read::read_to_string(&mut stderr, &mut err).map(|_| err)
+    });
+    let mut said = String::new();
+    std::io::Read::read_to_string(child.stdout.as_mut().unwrap(), &mut said).unwrap();
+    said.push_str(&err.join().unwrap().unwrap());
+    let pid = child.id() as libc::pid_t;
+    let mut status = 0;
+    // SAFETY: an all-zero rusage is a valid value of the plain C struct wait4 fills.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: `pid` is this test's own child, not yet reaped; both pointers are to locals
+    // that outlive the call.
+    let reaped = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
+    assert_eq!(reaped, pid, "wait4: {}", std::io::Error::last_os_error());
+    assert!(
+        libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0,
+        "{said}"
+    );
+    let instants = said
+        .split(" instants")
+        .next()
+        .and_then(|head| head.rsplit(' ').next())
+        .and_then(|n| n.parse::<i64>().ok())
+        .unwrap_or_else(|| panic!("no instants said: {said}"));
+    (usage.ru_nvcsw, instants)
+}
+
+/// An instant of the chapter's launch puts each of its two processes to sleep about once:
+/// a process runs its events on the thread that receives what they wait for, on Zenoh's one
+/// worker ([`ratelab::distributed::ZENOH_RUNTIME`]), so an instant's two hops wake one
+/// thread each and hand nothing to another. That is what keeps an instant at a bare round
+/// trip's cost (issue 76 item 4; BENCHMARKS.md, "How often an instant sleeps"), whose two
+/// sides sleep 6 to 12 times a round trip. Counted, not timed: the launch's voluntary
+/// context switches, a long launch's less a short one's (start-up and the end), per instant
+/// between them. 1.1–1.8 here; Zenoh's runtime on two workers a pool, with the receive
+/// handed to another thread, reads 8.4.
+#[test]
+fn an_instant_of_the_chapter_s_launch_sleeps_about_once_a_process() {
+    let _m = crate::machine::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let (short_sleeps, short_instants) = sleeps_and_instants("2", &dir.path().join("short"));
+    let (long_sleeps, long_instants) = sleeps_and_instants("40", &dir.path().join("long"));
+    assert_eq!((short_instants, long_instants), (101, 2001));
+    let per_instant = (long_sleeps - short_sleeps) as f64 / (long_instants - short_instants) as f64;
+    assert!(
+        per_instant <= 3.0,
+        "{per_instant:.2} sleeps an instant ({short_sleeps} in 2 s, {long_sleeps} in 40 s): a hop handed to another thread?"
+    );
+}
+
 /// For seeds 0–2 at control 50 and 5 Hz, virtual clock: `launch LAUNCH_GRAPH --processes`
 /// (the chapter's two processes, lockstep) writes byte for byte the metrics.json of
 /// `run RUN_GRAPH`. The graph arguments are a `--graph FILE` pair or a launch's positional
