@@ -165,7 +165,10 @@ pub const ZENOH_RUNTIME: &str = "(rx: (handover: app), tx: (handover: app), \
 /// # Errors
 /// [`DistError::Usage`] when the user's `ZENOH_RUNTIME` is one Zenoh cannot use (not its
 /// RON syntax, an unknown pool or field, or no worker thread): Zenoh itself would panic on
-/// it at its first use.
+/// it at its first use. One Zenoh can use but that runs its receive and send on two
+/// threads is accepted here, and every TLS session of a graph refused when opened
+/// ([`open_router`], [`open_client`], [`open_linked_peer`], [`open_session`]): Zenoh's TLS link is not safe on it (eclipse-zenoh/zenoh#2557); a session
+/// without TLS (`ratelab ros2` to a ROS 2 graph's router) is.
 pub fn set_zenoh_runtime() -> Result<(), DistError> {
     if std::env::var_os("ZENOH_RUNTIME").is_none_or(|v| v.is_empty()) {
         std::env::set_var("ZENOH_RUNTIME", ZENOH_RUNTIME);
@@ -187,7 +190,12 @@ pub fn set_zenoh_runtime() -> Result<(), DistError> {
     });
     std::panic::set_hook(hook);
     match threads {
-        Ok(Some(n)) if n > 0 => Ok(()),
+        Ok(Some(n)) if n > 0 => {
+            if let Some(why) = shares_a_tls_stream_across_threads() {
+                let _ = UNSOUND_OVER_TLS.set(why);
+            }
+            Ok(())
+        }
         Ok(_) => Err(DistError::Usage(
             "ZENOH_RUNTIME gives a Zenoh pool no worker thread (each needs at least one)".into(),
         )),
@@ -197,6 +205,63 @@ pub fn set_zenoh_runtime() -> Result<(), DistError> {
                 .into(),
         )),
     }
+}
+
+/// Why the user's `ZENOH_RUNTIME` may not carry a TLS link, once [`set_zenoh_runtime`] has
+/// found that it may not ([`open_as`] refuses every session of a graph then).
+static UNSOUND_OVER_TLS: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+
+/// Whether a `ZENOH_RUNTIME` Zenoh has read (its pools' settings) would let Zenoh's
+/// receive and send tasks run at once on two threads: `Some(why)` unless both pools are
+/// handed to the same pool of one worker thread. zenoh-link-tls reads and writes one
+/// rustls stream from its receive and send tasks with no lock between them
+/// (eclipse-zenoh/zenoh#2557, open): on two threads that is a data race, which corrupts
+/// memory. Seen here with `(rx: (worker_threads: 2), tx: (worker_threads: 2), app:
+/// (worker_threads: 2))`: a process aborted in rustls's `Error::clone` ("memory
+/// allocation of 94411650483176 bytes failed"), others hung before the run or in it,
+/// 3 launches in 100. Zenoh's own default (rx on 2 workers, tx on 1) is one of these.
+fn shares_a_tls_stream_across_threads() -> Option<String> {
+    use std::borrow::Borrow;
+    use zenoh_runtime::{RuntimeParam, ZRuntime};
+    let name = |z: ZRuntime| match z {
+        ZRuntime::Application => "app",
+        ZRuntime::Acceptor => "acc",
+        ZRuntime::TX => "tx",
+        ZRuntime::RX => "rx",
+        ZRuntime::Net => "net",
+    };
+    // A pool handed over runs on the other's threads (one hop: Zenoh reads no further).
+    let pool = |z: ZRuntime| {
+        let p: &RuntimeParam = z.borrow();
+        p.handover.unwrap_or(z)
+    };
+    let (rx, tx) = (pool(ZRuntime::RX), pool(ZRuntime::TX));
+    let threads = |z: ZRuntime| {
+        let p: &RuntimeParam = z.borrow();
+        p.worker_threads
+    };
+    let runs = if rx != tx {
+        format!(
+            "Zenoh's receive and send on two pools ({} and {})",
+            name(rx),
+            name(tx)
+        )
+    } else if threads(rx) > 1 {
+        format!(
+            "Zenoh's receive and send on a pool of {} threads ({})",
+            threads(rx),
+            name(rx)
+        )
+    } else {
+        return None;
+    };
+    Some(format!(
+        "ZENOH_RUNTIME runs {runs}: a graph's links are TLS, and Zenoh's TLS link then reads \
+         and writes one stream from two threads at once, which corrupts memory \
+         (eclipse-zenoh/zenoh#2557); hand rx and tx to one pool of one worker, e.g. \
+         '(rx: (handover: app), tx: (handover: app), app: (worker_threads: 1))', or unset it \
+         for ratelab's own"
+    ))
 }
 
 pub use ratelab_core::limits::MAX_PROCESSES;
@@ -770,6 +835,9 @@ fn open_as(
     connect: &[String],
     access: Access<'_>,
 ) -> Result<zenoh::Session, DistError> {
+    if let Some(why) = UNSOUND_OVER_TLS.get() {
+        return Err(DistError::Usage(why.clone()));
+    }
     let mut config = zenoh::Config::default();
     let json = |v: &[String]| serde_json::to_string(v).unwrap_or_else(|_| "[]".into());
     let set = |c: &mut zenoh::Config, k: &str, v: &str| {

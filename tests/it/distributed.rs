@@ -208,8 +208,10 @@ fn sleeps_and_instants(duration_s: &str, out: &Path) -> (i64, i64) {
 /// trip's cost (issue 76 item 4; BENCHMARKS.md, "How often an instant sleeps"), whose two
 /// sides sleep 6 to 12 times a round trip. Counted, not timed: the launch's voluntary
 /// context switches, a long launch's less a short one's (start-up and the end), per instant
-/// between them. 1.1–1.8 here; Zenoh's runtime on two workers a pool, with the receive
-/// handed to another thread, reads 8.4.
+/// between them, at most 2.6: 1.1–1.8 on one VM, 1.97–2.08 on another (1.35–1.83 with two
+/// busy loops beside it). With Zenoh's receive and send on a thread of their own (handed to
+/// `net` or `tx`, apart from the application's) it reads 3.1–4.1 and fails; with Zenoh's
+/// own pools it read 8.4 (a setting refused since: [`ratelab::distributed::set_zenoh_runtime`]).
 #[test]
 fn an_instant_of_the_chapter_s_launch_sleeps_about_once_a_process() {
     let _m = crate::machine::shared();
@@ -218,8 +220,9 @@ fn an_instant_of_the_chapter_s_launch_sleeps_about_once_a_process() {
     let (long_sleeps, long_instants) = sleeps_and_instants("40", &dir.path().join("long"));
     assert_eq!((short_instants, long_instants), (101, 2001));
     let per_instant = (long_sleeps - short_sleeps) as f64 / (long_instants - short_instants) as f64;
+    println!("{per_instant:.2} sleeps an instant ({short_sleeps} in 2 s, {long_sleeps} in 40 s)");
     assert!(
-        per_instant <= 3.0,
+        per_instant <= 2.6,
         "{per_instant:.2} sleeps an instant ({short_sleeps} in 2 s, {long_sleeps} in 40 s): a hop handed to another thread?"
     );
 }
@@ -1865,6 +1868,25 @@ fn every_process_runs_zenoh_on_one_worker_unless_zenoh_runtime_says_otherwise() 
             "not a runtime setting Zenoh can read",
         ),
         ("(rx: (worker_threads: 0))", "no worker thread"),
+        // Ones Zenoh can use, but whose receive and send may run at once on two threads,
+        // where Zenoh's TLS link corrupts memory (eclipse-zenoh/zenoh#2557): a graph's
+        // sessions are refused before any process starts. Zenoh's default is one.
+        (
+            "(rx: (worker_threads: 2), tx: (worker_threads: 2), app: (worker_threads: 2))",
+            "ZENOH_RUNTIME runs Zenoh's receive and send on two pools (rx and tx): a graph's links are TLS",
+        ),
+        (
+            "(rx: (worker_threads: 2))",
+            "on two pools (rx and tx)",
+        ),
+        (
+            "(rx: (handover: app), tx: (handover: app), app: (worker_threads: 2))",
+            "on a pool of 2 threads (app)",
+        ),
+        (
+            "(rx: (handover: net), tx: (handover: app))",
+            "on two pools (net and app)",
+        ),
     ] {
         let o = bin()
             .args(["launch", "--processes", "--duration", "1"])
@@ -1872,6 +1894,16 @@ fn every_process_runs_zenoh_on_one_worker_unless_zenoh_runtime_says_otherwise() 
             .output()
             .unwrap();
         assert_one_line_exit_2(&o, why);
+        if why.contains("pool") {
+            assert_one_line_exit_2(&o, "eclipse-zenoh/zenoh#2557");
+            // Nothing of a graph across processes: one process runs on.
+            let o = bin()
+                .args(["run", "--clock", "virtual", "--duration", "0.2"])
+                .env("ZENOH_RUNTIME", bad)
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{bad}: {o:?}");
+        }
     }
 }
 
