@@ -29,8 +29,8 @@
 //! - **Discovery and liveliness** are Zenoh liveliness tokens, one per node and one per
 //!   publisher and subscriber carrying its QoS in short (rmw_zenoh encodes its graph the same
 //!   way, `docs/design.md`): `ratelab top` lists them, and the launcher sees a process go
-//!   once its token has stayed withdrawn for a moment ([`liveliness`]: Zenoh may withdraw a
-//!   live token briefly as routes change).
+//!   once its token has stayed withdrawn for a moment ([`liveliness`]: Zenoh withdraws a
+//!   token when the link it was heard over closes, though another may still carry it).
 //! - **Time.** Under the real clock the processes share the host's monotonic clock and one
 //!   run-time zero, so stamps and sense→act latency stay exact on one host. Under the
 //!   virtual clock every process replays the one [`ratelab_runtime::scheduler::VirtualScheduler`]
@@ -167,8 +167,9 @@ pub const ZENOH_RUNTIME: &str = "(rx: (handover: app), tx: (handover: app), \
 /// RON syntax, an unknown pool or field, or no worker thread): Zenoh itself would panic on
 /// it at its first use. One Zenoh can use but that runs its receive and send on two
 /// threads is accepted here, and every TLS session of a graph refused when opened
-/// ([`open_router`], [`open_client`], [`open_linked_peer`], [`open_session`]): Zenoh's TLS link is not safe on it (eclipse-zenoh/zenoh#2557); a session
-/// without TLS (`ratelab ros2` to a ROS 2 graph's router) is.
+/// ([`open_router`], [`open_client`], [`open_linked_peer`], [`open_session`]): Zenoh's
+/// TLS link is not safe on it (eclipse-zenoh/zenoh#2557); a session without TLS
+/// (`ratelab ros2` to a ROS 2 graph's router) is.
 pub fn set_zenoh_runtime() -> Result<(), DistError> {
     if std::env::var_os("ZENOH_RUNTIME").is_none_or(|v| v.is_empty()) {
         std::env::set_var("ZENOH_RUNTIME", ZENOH_RUNTIME);

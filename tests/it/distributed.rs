@@ -159,46 +159,20 @@ fn virtual_lockstep_through_the_star_is_byte_identical_too() {
 /// The launch's sleeps (voluntary context switches of the launcher and its processes, as
 /// the kernel counts them for a reaped child and the children it reaped) and the instants
 /// of a virtual-clock launch of the chapter's graph lasting `duration_s` seconds.
-// Reaped by wait4, which clippy does not see as a wait.
-#[allow(clippy::zombie_processes)]
 fn sleeps_and_instants(duration_s: &str, out: &Path) -> (i64, i64) {
-    let mut child = bin()
-        .args(["launch", "--processes", "--clock", "virtual", "--headless"])
-        .args(["--duration", duration_s, "--out"])
-        .arg(out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    // Both pipes read to their end (the launch and its processes have exited, or closed
-    // them), then the child reaped by wait4 for its resource usage, not by `Child::wait`.
-    let mut stderr = child.stderr.take().unwrap();
-    let err = std::thread::spawn(move || {
-        let mut err = String::new();
-        std::io::Read::read_to_string(&mut stderr, &mut err).map(|_| err)
-    });
-    let mut said = String::new();
-    std::io::Read::read_to_string(child.stdout.as_mut().unwrap(), &mut said).unwrap();
-    said.push_str(&err.join().unwrap().unwrap());
-    let pid = child.id() as libc::pid_t;
-    let mut status = 0;
-    // SAFETY: an all-zero rusage is a valid value of the plain C struct wait4 fills.
-    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-    // SAFETY: `pid` is this test's own child, not yet reaped; both pointers are to locals
-    // that outlive the call.
-    let reaped = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
-    assert_eq!(reaped, pid, "wait4: {}", std::io::Error::last_os_error());
-    assert!(
-        libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0,
-        "{said}"
-    );
+    let out = out.to_str().unwrap();
+    let args = ["launch", "--processes", "--clock", "virtual", "--headless"];
+    let args = [&args[..], &["--duration", duration_s, "--out", out]].concat();
+    let o = crate::hostile::run_child(&args, Path::new(REPO), Duration::from_secs(300), |_| {});
+    let said = format!("{}{}", o.stdout, o.stderr);
+    assert!(!o.timed_out && o.code == Some(0), "{said}");
     let instants = said
         .split(" instants")
         .next()
         .and_then(|head| head.rsplit(' ').next())
         .and_then(|n| n.parse::<i64>().ok())
         .unwrap_or_else(|| panic!("no instants said: {said}"));
-    (usage.ru_nvcsw, instants)
+    (o.voluntary_switches, instants)
 }
 
 /// An instant of the chapter's launch puts each of its two processes to sleep about once:
@@ -208,7 +182,7 @@ fn sleeps_and_instants(duration_s: &str, out: &Path) -> (i64, i64) {
 /// trip's cost (issue 76 item 4; BENCHMARKS.md, "How often an instant sleeps"), whose two
 /// sides sleep 6 to 12 times a round trip. Counted, not timed: the launch's voluntary
 /// context switches, a long launch's less a short one's (start-up and the end), per instant
-/// between them, at most 2.6: 1.1–1.8 on one VM, 1.97–2.08 on another (1.35–1.83 with two
+/// between them, at most 2.6: 1.1–1.8 on one VM, 1.60–2.11 on another (1.35–1.83 with two
 /// busy loops beside it). With Zenoh's receive and send on a thread of their own (handed to
 /// `net` or `tx`, apart from the application's) it reads 3.1–4.1 and fails; with Zenoh's
 /// own pools it read 8.4 (a setting refused since: [`ratelab::distributed::set_zenoh_runtime`]).

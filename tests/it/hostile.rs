@@ -30,6 +30,8 @@ pub(crate) struct Outcome {
     /// sample and its `ru_maxrss` may be this test binary's peak (see [`run_child`]); then
     /// `peak_mib` is only an upper bound, and [`measure_child`] runs the child again.
     pub(crate) peak_is_the_child_s: bool,
+    /// Voluntary context switches (`ru_nvcsw`) of the child and the children it reaped.
+    pub(crate) voluntary_switches: i64,
     pub(crate) wall: Duration,
     pub(crate) timed_out: bool,
 }
@@ -117,6 +119,7 @@ pub(crate) fn run_child(
         stderr: err_t.join().unwrap(),
         peak_mib: peak_kib as f64 / 1024.0,
         peak_is_the_child_s,
+        voluntary_switches: usage.ru_nvcsw,
         wall,
         timed_out,
     }

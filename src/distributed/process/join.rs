@@ -500,54 +500,50 @@ mod tests {
 
     /// Zenoh withdrew the launcher's token for a moment as the processes linked to each
     /// other (declared again 5 ms later): the wait goes on.
-    #[test]
-    fn a_wait_rides_out_the_launcher_s_token_withdrawn_for_a_moment() {
-        let (stop, gone) = (StopFlag::new(), TokenWatch::new());
-        gone.note(zenoh::sample::SampleKind::Delete);
+    /// A wait watching `gone`, without a deadline, ready at its `ready_at`-th poll;
+    /// `each(n)` runs at the n-th poll first.
+    fn ready_at_poll(
+        gone: &TokenWatch,
+        ready_at: u32,
+        mut each: impl FnMut(u32),
+    ) -> Result<(), DistError> {
         let mut polls = 0;
+        let ready = || {
+            polls += 1;
+            each(polls);
+            if polls == ready_at {
+                Ok(())
+            } else {
+                Err(())
+            }
+        };
         poll_until(
-            &stop,
-            Some(&gone),
+            &StopFlag::new(),
+            Some(gone),
             None,
             NOW,
-            || {
-                polls += 1;
-                if polls == 3 {
-                    gone.note(zenoh::sample::SampleKind::Put);
-                }
-                if polls == 10 {
-                    Ok(())
-                } else {
-                    Err(())
-                }
-            },
+            ready,
             |()| unreachable!(),
         )
+    }
+
+    #[test]
+    fn a_wait_rides_out_the_launcher_s_token_withdrawn_for_a_moment() {
+        let gone = TokenWatch::new();
+        gone.note(zenoh::sample::SampleKind::Delete);
+        ready_at_poll(&gone, 10, |n| {
+            if n == 3 {
+                gone.note(zenoh::sample::SampleKind::Put);
+            }
+        })
         .unwrap();
         assert!(!gone.is_gone_at(u64::MAX), "declared again: never gone");
     }
 
     #[test]
     fn a_wait_without_a_deadline_goes_on_until_ready_while_the_launcher_lives() {
-        let (stop, gone) = (StopFlag::new(), TokenWatch::new());
         let started = Instant::now();
-        let mut polls = 0;
-        poll_until(
-            &stop,
-            Some(&gone),
-            None,
-            NOW,
-            || {
-                polls += 1;
-                if polls == 20 {
-                    Ok(())
-                } else {
-                    Err(())
-                }
-            },
-            |()| unreachable!(),
-        )
-        .unwrap();
+        ready_at_poll(&TokenWatch::new(), 20, |_| {}).unwrap();
         assert!(started.elapsed() >= 19 * NOW);
     }
 }
