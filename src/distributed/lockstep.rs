@@ -1,6 +1,7 @@
 //! The virtual clock across processes: one order of events, replayed in every process.
 //!
-//! Every process (and the launcher) runs the same [`VirtualScheduler`](ratelab_runtime::scheduler::VirtualScheduler) over the whole graph,
+//! Every process (and the launcher) runs the same
+//! [`VirtualScheduler`](ratelab_runtime::scheduler::VirtualScheduler) over the whole graph,
 //! with the whole graph's executors, so all of them know the run's one order of events (a
 //! tick's start, and when the tick computes, the instant its held outputs go out:
 //! [`Event`]; by time, then the executors' order) and number them 0, 1, …. A process runs
@@ -146,11 +147,12 @@ pub const FOLLOWED_MAX_AGE: std::time::Duration = std::time::Duration::from_mill
 /// made two. (Samples a Zenoh callback holds back past its send budget go later, from the
 /// main thread, with their reports on their own key.) Whoever may read a topic may then read
 /// the reports its samples carry: the ticks' compute times and a failure's text, which the
-/// run's summary prints anyway. Only where the one process that reads a sample is every process that needs the
-/// reports: a launch of two processes linked directly (in a star the launcher hands the
-/// reports on; with three or more, a sample reaches one process of several). A process
-/// reading a topic takes the reports its sample carries only from the process that
-/// publishes the topic ([`decode_carried`]; the access rules let no other put on its key).
+/// run's summary prints anyway. Only where the one process that reads a sample is every
+/// process that needs the reports: a launch of two processes linked directly (in a star the
+/// launcher hands the reports on; with three or more, a sample reaches one process of
+/// several). A process reading a topic takes the reports its sample carries only from the
+/// process that publishes the topic ([`decode_carried`]; the access rules let no other put
+/// on its key).
 pub fn reports_ride_on_samples(spec: &GraphSpec, direct: bool) -> bool {
     direct && spec.placement().len() == 2
 }
