@@ -498,8 +498,6 @@ mod tests {
         assert!(e.contains("interrupted"), "{e}");
     }
 
-    /// Zenoh withdrew the launcher's token for a moment as the processes linked to each
-    /// other (declared again 5 ms later): the wait goes on.
     /// A wait watching `gone`, without a deadline, ready at its `ready_at`-th poll;
     /// `each(n)` runs at the n-th poll first.
     fn ready_at_poll(
@@ -527,6 +525,8 @@ mod tests {
         )
     }
 
+    /// Zenoh withdrew the launcher's token for a moment as the processes linked to each
+    /// other (declared again 5 ms later): the wait goes on.
     #[test]
     fn a_wait_rides_out_the_launcher_s_token_withdrawn_for_a_moment() {
         let gone = TokenWatch::new();
